@@ -1,0 +1,23 @@
+"""The command line parses and reports its sub-commands."""
+
+import pytest
+
+from pymc_vcc.cli import build_parser, main
+
+
+def test_help_lists_commands(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    assert "demo" in out and "bench" in out
+
+
+def test_unknown_benchmark_is_a_clear_error():
+    with pytest.raises(SystemExit, match="unknown benchmark"):
+        main(["bench", "--only", "no-such-benchmark"])
+
+
+def test_parser_requires_a_command():
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([])
