@@ -1,0 +1,319 @@
+"""Cheap simulators with exact posteriors, and simulators that fail, stall or log their calls.
+
+Users and the test suite share these problems to check samplers against known answers. Each
+simulator is a picklable callable ``simulator(theta, rng)`` with ``parameter_names``,
+``output_names`` and ``bounds`` (the uniform prior box the exact posteriors assume).
+
+Rejection ABC with a threshold ε on a distance that is a function of a sufficient statistic
+does not sample the exact posterior but the exact posterior convolved with the acceptance window.
+For a flat prior, a Gaussian posterior and a window that is a ball of radius ε in whitened
+(posterior-covariance) units, the ABC posterior is Gaussian-plus-uniform-ball with the same mean
+and its standard deviations inflated by :func:`abc_sd_inflation`; the problems below give the
+whitened distances that make this exact.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import xarray as xr
+from scipy import stats
+
+from pymc_vcc.series import OutputData, Simulator
+
+
+def abc_sd_inflation(epsilon: float, dim: int) -> float:
+    """Ratio of ABC-posterior to exact-posterior standard deviation for a whitened ball window.
+
+    A uniform ball of radius ε in ``dim`` dimensions has per-axis variance ε²/(dim + 2); added to
+    a unit-variance Gaussian it gives sqrt(1 + ε²/(dim + 2)).
+    """
+    return float(np.sqrt(1.0 + epsilon**2 / (dim + 2)))
+
+
+def _as_rows(observed: OutputData) -> np.ndarray:
+    if isinstance(observed, xr.Dataset):
+        return np.stack([np.asarray(v.values, dtype=float) for v in observed.data_vars.values()])
+    array = np.asarray(observed, dtype=float)
+    return array[np.newaxis, :] if array.ndim == 1 else array
+
+
+@dataclass(frozen=True)
+class GaussianLocation:
+    """Gaussian location: y_t = mu + sigma·e_t, t = 1..n_time, e_t ~ N(0, 1), one output ``y``.
+
+    With a uniform prior on [low, high] the exact posterior of mu is N(ȳ, sigma²/n_time)
+    truncated to the bounds; ȳ is sufficient, and :meth:`distance` measures it in posterior sd.
+    """
+
+    n_time: int = 100
+    sigma: float = 1.0
+    low: float = -3.0
+    high: float = 3.0
+
+    parameter_names: ClassVar[tuple[str, ...]] = ("mu",)
+    output_names: ClassVar[tuple[str, ...]] = ("y",)
+
+    @property
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        """The uniform prior box the exact posterior assumes."""
+        return {"mu": (self.low, self.high)}
+
+    @property
+    def standard_error(self) -> float:
+        """sigma / sqrt(n_time): sd of ȳ given mu, the untruncated posterior sd."""
+        return self.sigma / np.sqrt(self.n_time)
+
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> np.ndarray:
+        return theta["mu"] + self.sigma * rng.standard_normal((1, self.n_time))
+
+    def posterior(self, observed: OutputData) -> stats.rv_continuous:
+        """Exact posterior of mu (a frozen scipy truncated normal)."""
+        mean = float(_as_rows(observed)[0].mean())
+        scale = self.standard_error
+        return stats.truncnorm(
+            (self.low - mean) / scale, (self.high - mean) / scale, loc=mean, scale=scale
+        )
+
+    def distance(self, sims: np.ndarray, obs: np.ndarray) -> np.ndarray:
+        """|ȳ_sim − ȳ_obs| in units of sigma/sqrt(n_time) (batch form, (N, 1, m) → (N,))."""
+        return np.abs(sims[:, 0, :].mean(axis=1) - obs[0].mean()) / self.standard_error
+
+
+@dataclass(frozen=True)
+class LinearGaussian:
+    """Straight line in noise: y_t = a + b·x_t + sigma·e_t on x_t = linspace(−1, 1, n_time).
+
+    With a flat prior the exact posterior of (a, b) is N(β̂, sigma²(XᵀX)⁻¹), β̂ the least-squares
+    fit; :meth:`posterior_moments` ignores the prior bounds (exact when the posterior lies many
+    sds inside them). :meth:`distance` is the Mahalanobis distance between least-squares fits,
+    a function of the sufficient statistic.
+    """
+
+    n_time: int = 50
+    sigma: float = 0.5
+    low: float = -3.0
+    high: float = 3.0
+
+    parameter_names: ClassVar[tuple[str, ...]] = ("a", "b")
+    output_names: ClassVar[tuple[str, ...]] = ("y",)
+
+    @property
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        """The uniform prior box."""
+        return {"a": (self.low, self.high), "b": (self.low, self.high)}
+
+    @property
+    def design(self) -> np.ndarray:
+        """Design matrix X (n_time, 2): a column of ones and x_t."""
+        x = np.linspace(-1.0, 1.0, self.n_time)
+        return np.column_stack([np.ones_like(x), x])
+
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> np.ndarray:
+        line = self.design @ np.array([theta["a"], theta["b"]])
+        return (line + self.sigma * rng.standard_normal(self.n_time))[np.newaxis, :]
+
+    def _fit(self, series: np.ndarray) -> np.ndarray:
+        design = self.design
+        return np.linalg.solve(design.T @ design, design.T @ series.T).T
+
+    def posterior_moments(self, observed: OutputData) -> tuple[np.ndarray, np.ndarray]:
+        """Exact posterior mean (2,) and covariance (2, 2) of (a, b) under a flat prior."""
+        design = self.design
+        covariance = self.sigma**2 * np.linalg.inv(design.T @ design)
+        return self._fit(_as_rows(observed)[0]), covariance
+
+    def distance(self, sims: np.ndarray, obs: np.ndarray) -> np.ndarray:
+        """Mahalanobis distance between least-squares fits, in posterior sds ((N,1,m) → (N,))."""
+        design = self.design
+        whitening = np.linalg.cholesky(design.T @ design) / self.sigma
+        difference = self._fit(sims[:, 0, :]) - self._fit(obs[0])
+        return np.linalg.norm(difference @ whitening, axis=1)
+
+
+@dataclass(frozen=True)
+class ShiftedProfile:
+    """A known profile seen with an unknown offset: y_t = mu + sigma·e + c_t, e ~ N(0, 1) once.
+
+    c_t is ``n_time`` equally spaced values on [−span/2, span/2] (a ramp). The offset
+    x = mu + sigma·e is sufficient and the KS statistic between two such series depends only on
+    the offset difference δ, monotonically: KS = min(n, floor(|δ|/h) + 1)/n with h the grid
+    step. So KS-distance ABC with threshold ε accepts exactly |δ| < :meth:`ks_window` (ε), and
+    its exact ABC posterior is N(x_obs, sigma²) convolved with that uniform window.
+    """
+
+    n_time: int = 501
+    sigma: float = 0.05
+    span: float = 1.0
+    low: float = -1.0
+    high: float = 1.0
+
+    parameter_names: ClassVar[tuple[str, ...]] = ("mu",)
+    output_names: ClassVar[tuple[str, ...]] = ("y",)
+
+    @property
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        """The uniform prior box."""
+        return {"mu": (self.low, self.high)}
+
+    @property
+    def profile(self) -> np.ndarray:
+        """The known profile c_t (n_time,)."""
+        return np.linspace(-self.span / 2, self.span / 2, self.n_time)
+
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> np.ndarray:
+        offset = theta["mu"] + self.sigma * rng.standard_normal()
+        return (offset + self.profile)[np.newaxis, :]
+
+    def posterior(self, observed: OutputData) -> stats.rv_continuous:
+        """Exact posterior of mu: N(x_obs, sigma²) truncated to the bounds."""
+        offset = float(_as_rows(observed)[0].mean())
+        return stats.truncnorm(
+            (self.low - offset) / self.sigma,
+            (self.high - offset) / self.sigma,
+            loc=offset,
+            scale=self.sigma,
+        )
+
+    def ks_window(self, epsilon: float) -> float:
+        """Half-width of the offset differences |δ| that KS ≤ ε accepts (same units as mu)."""
+        step = self.span / (self.n_time - 1)
+        return step * np.floor(epsilon * self.n_time + 1e-9)
+
+
+@dataclass(frozen=True)
+class Flaky:
+    """Wraps a simulator so that a fraction ``rate`` of runs fail, decided by the run's rng.
+
+    Failure modes, chosen evenly among ``modes`` by the same uniform draw: ``"raise"`` raises
+    RuntimeError, ``"nan"`` and ``"inf"`` return outputs with a non-finite value, ``"status"``
+    returns a Dataset flagged ``attrs["status"] = "failed"`` as the VCC simulator does.
+    """
+
+    base: Simulator
+    rate: float
+    modes: tuple[str, ...] = ("raise", "nan", "inf", "status")
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.rate <= 1.0:
+            raise ValueError(f"rate must be in [0, 1], got {self.rate}")
+        unknown = set(self.modes) - {"raise", "nan", "inf", "status"}
+        if unknown or not self.modes:
+            raise ValueError(f"unknown failure modes {sorted(unknown)}; use raise/nan/inf/status")
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(self.base.parameter_names)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(self.base.output_names)
+
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> OutputData:
+        draw = rng.random()
+        outputs = self.base(theta, rng)
+        if draw >= self.rate:
+            return outputs
+        mode = self.modes[min(int(draw / self.rate * len(self.modes)), len(self.modes) - 1)]
+        if mode == "raise":
+            raise RuntimeError("synthetic failure")
+        if mode == "status":
+            dataset = as_dataset(outputs, self.output_names)
+            dataset.attrs.update(status="failed", failure_reason="synthetic solver failure")
+            return dataset
+        broken = np.array(outputs, dtype=float)
+        broken[..., 0] = np.nan if mode == "nan" else np.inf
+        return broken
+
+
+def as_dataset(outputs: np.ndarray, names: tuple[str, ...]) -> xr.Dataset:
+    """An (outputs, time) array as a Dataset with one variable per output over ``time``."""
+    rows = np.asarray(outputs, dtype=float)
+    dataset = xr.Dataset({name: ("time", row) for name, row in zip(names, rows, strict=True)})
+    dataset.attrs["status"] = "ok"
+    return dataset
+
+
+@dataclass(frozen=True)
+class AsDataset:
+    """Wraps a simulator so that it returns an xarray Dataset (with ``status = "ok"``)."""
+
+    base: Simulator
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(self.base.parameter_names)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(self.base.output_names)
+
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> xr.Dataset:
+        return as_dataset(self.base(theta, rng), self.output_names)
+
+
+@dataclass(frozen=True)
+class Slow:
+    """Wraps a simulator so that each run first takes ``seconds``.
+
+    ``busy=True`` spends that much CPU time of the calling thread (a fixed amount of work,
+    whatever the machine's load); ``busy=False`` sleeps in 10 ms slices (a stalled solver).
+    """
+
+    base: Simulator
+    seconds: float
+    busy: bool = True
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(self.base.parameter_names)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(self.base.output_names)
+
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> OutputData:
+        if self.busy:
+            end = time.thread_time() + self.seconds
+            while time.thread_time() < end:
+                pass
+        else:
+            end = time.perf_counter() + self.seconds
+            while (left := end - time.perf_counter()) > 0:
+                time.sleep(min(left, 0.01))
+        return self.base(theta, rng)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Wraps a simulator and appends one line per finished run to ``path``: the θ values.
+
+    Lets tests count how often each parameter draw was simulated (e.g. across a kill and a
+    resume); lines are written with O_APPEND, so concurrent processes do not interleave them.
+    """
+
+    base: Simulator
+    path: str
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(self.base.parameter_names)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(self.base.output_names)
+
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> OutputData:
+        outputs = self.base(theta, rng)
+        line = " ".join(repr(float(theta[name])) for name in sorted(theta)) + "\n"
+        descriptor = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        try:
+            os.write(descriptor, line.encode())
+        finally:
+            os.close(descriptor)
+        return outputs
