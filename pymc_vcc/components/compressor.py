@@ -1,0 +1,82 @@
+"""Variable-speed compressor: volumetric efficiency, shaft power, heat to refrigerant, shell loss.
+
+The four Table III correction factors act here: ``cf_vol`` on the volumetric efficiency,
+``cf_pow`` on the shaft power, ``cf_pref`` on the share of it reaching the refrigerant and
+``cf_shell`` on the shell heat loss to the ambient.
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+from pymc_vcc.components.smooth import smooth_max, smooth_pos
+from pymc_vcc.refrigerant import entropy, h_from_ps, state
+
+
+@njit(cache=True)
+def volumetric_efficiency(
+    pressure_ratio: float, clearance: float, exponent: float, cf_vol: float
+) -> float:
+    """cf · (1 - c (r^(1/n) - 1)), the clearance re-expansion model, smoothly floored at 0.02."""
+    nominal = 1.0 - clearance * (pressure_ratio ** (1.0 / exponent) - 1.0)
+    return cf_vol * smooth_max(nominal, 0.02, 0.01)
+
+
+@njit(cache=True)
+def compressor_mass_flow(
+    rho_suction: float, speed: float, displacement: float, eta_vol: float
+) -> float:
+    """Mass flow, kg/s: η_v ρ_s V_disp n with speed n in rev/s and displacement in m³/rev."""
+    return eta_vol * rho_suction * displacement * speed
+
+
+@njit(cache=True)
+def shaft_power(
+    mass_flow: float, dh_isentropic: float, isentropic_efficiency: float, cf_pow: float
+) -> float:
+    """Electric/shaft power, W: cf ṁ Δh_s / η_s (Δh_s smoothly floored at 0)."""
+    return cf_pow * mass_flow * smooth_pos(dh_isentropic, 100.0) / isentropic_efficiency
+
+
+@njit(cache=True)
+def shell_loss(ua: float, cf_shell: float, T_shell: float, T_ambient: float) -> float:
+    """Heat lost through the shell to the ambient, W: cf UA (T_shell - T_amb)."""
+    return cf_shell * ua * (T_shell - T_ambient)
+
+
+@njit(cache=True)
+def compressor(
+    tables,
+    p_suction: float,
+    h_suction: float,
+    rho_suction: float,
+    p_discharge: float,
+    speed: float,
+    T_ambient: float,
+    displacement: float,
+    clearance: float,
+    exponent: float,
+    isentropic_efficiency: float,
+    refrigerant_fraction: float,
+    shell_ua: float,
+    cf_vol: float,
+    cf_pow: float,
+    cf_pref: float,
+    cf_shell: float,
+) -> tuple[float, float, float, float]:
+    """(ṁ kg/s, discharge enthalpy J/kg, shaft power W, net power to the refrigerant W).
+
+    Power to the refrigerant is cf_pref · fraction · shaft power, less the shell loss evaluated
+    at the temperature the gas would reach without it. Non-finite (NaN) results mean a property
+    call left the tables.
+    """
+    eta_vol = volumetric_efficiency(p_discharge / p_suction, clearance, exponent, cf_vol)
+    mass_flow = compressor_mass_flow(rho_suction, speed, displacement, eta_vol)
+    s_suction = entropy(tables, p_suction, h_suction)
+    h_isentropic = h_from_ps(tables, p_discharge, s_suction)
+    power = shaft_power(mass_flow, h_isentropic - h_suction, isentropic_efficiency, cf_pow)
+    to_refrigerant = cf_pref * refrigerant_fraction * power
+    h_adiabatic = h_suction + to_refrigerant / mass_flow
+    T_adiabatic = state(tables, p_discharge, h_adiabatic)[0]
+    net = to_refrigerant - shell_loss(shell_ua, cf_shell, T_adiabatic, T_ambient)
+    return mass_flow, h_suction + net / mass_flow, power, net
