@@ -1,0 +1,354 @@
+"""Priors over named, bounded parameters: a uniform box and a bounded Gaussian mixture.
+
+Both describe parameters by ordered names with physical bounds [low, high] and offer
+``sample(n, rng)`` (an (n, d) array in name order), ``logpdf(x)`` and a netCDF round trip.
+
+:class:`GMMPrior` is the paper's device for passing a posterior on as the next prior: a Gaussian
+mixture fitted with scikit-learn, its number of components chosen by BIC. It lives in the
+unbounded logit space of the bounds, u = log(p / (1 − p)) with p = (x − low) / (high − low), so
+every draw respects the physical bounds; its ``logpdf`` is the density in the physical space,
+log q(u(x)) − Σ log((high − low) p (1 − p)).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from scipy.special import expit, logit, logsumexp
+from sklearn.mixture import GaussianMixture
+
+Bounds = Mapping[str, tuple[float, float]]
+
+_EDGE = 1e-9  # fraction of the range kept between a sample and its bound in logit space
+
+
+def validate_bounds(bounds: Bounds) -> dict[str, tuple[float, float]]:
+    """Check parameter bounds: a non-empty mapping name -> (low, high), finite, low < high."""
+    if not isinstance(bounds, Mapping) or not bounds:
+        raise ValueError(f"bounds must be a non-empty mapping name -> (low, high), got {bounds!r}")
+    checked = {}
+    for name, pair in bounds.items():
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"parameter names must be non-empty strings, got {name!r}")
+        try:
+            low, high = (float(value) for value in pair)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"bounds of {name!r} must be a pair (low, high), got {pair!r}"
+            ) from None
+        if not (np.isfinite(low) and np.isfinite(high)):
+            raise ValueError(f"bounds of {name!r} must be finite, got ({low}, {high})")
+        if low >= high:
+            raise ValueError(f"bounds of {name!r} need low < high, got low={low} >= high={high}")
+        checked[name] = (low, high)
+    return checked
+
+
+class Prior(ABC):
+    """A distribution over named parameters inside physical bounds.
+
+    Attributes:
+        names: parameter names, the column order of samples.
+        lower, upper: bounds per parameter, arrays (d,).
+    """
+
+    names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    kind: str
+
+    def _set_bounds(self, bounds: Bounds) -> None:
+        checked = validate_bounds(bounds)
+        self.names = tuple(checked)
+        self.lower = np.array([low for low, _ in checked.values()])
+        self.upper = np.array([high for _, high in checked.values()])
+
+    @property
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        """name -> (low, high)."""
+        return {
+            name: (float(low), float(high))
+            for name, low, high in zip(self.names, self.lower, self.upper, strict=True)
+        }
+
+    @property
+    def ndim(self) -> int:
+        """Number of parameters."""
+        return len(self.names)
+
+    @abstractmethod
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` draws, array (n, d) in ``names`` order."""
+
+    @abstractmethod
+    def logpdf(self, x: np.ndarray) -> np.ndarray:
+        """Log-density at points x (n, d) or (d,) in physical units; −inf outside the bounds."""
+
+    @abstractmethod
+    def to_dataset(self) -> xr.Dataset:
+        """The prior as a Dataset (``attrs["kind"]`` names the class)."""
+
+    def save(self, path: str | Path) -> None:
+        """Write the prior to a netCDF file (read it back with :func:`load_prior`)."""
+        self.to_dataset().to_netcdf(path, engine="h5netcdf")
+
+    def _points(self, x: np.ndarray) -> np.ndarray:
+        points = np.asarray(x, dtype=float)
+        points = points[np.newaxis, :] if points.ndim == 1 else points
+        if points.ndim != 2 or points.shape[1] != self.ndim:
+            raise ValueError(
+                f"points must have shape (n, {self.ndim}) for parameters {list(self.names)}, "
+                f"got {np.shape(x)}"
+            )
+        return points
+
+    def _bounds_dataset(self) -> xr.Dataset:
+        return xr.Dataset(
+            {
+                "lower": ("parameter", self.lower, {"long_name": "lower bound"}),
+                "upper": ("parameter", self.upper, {"long_name": "upper bound"}),
+            },
+            coords={"parameter": list(self.names)},
+            attrs={"kind": self.kind},
+        )
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.bounds})"
+
+
+def _check_count(n: int) -> int:
+    if int(n) != n or n < 0:
+        raise ValueError(f"number of draws must be a non-negative integer, got {n}")
+    return int(n)
+
+
+class UniformPrior(Prior):
+    """Independent uniform distributions on [low, high] per parameter (SI units).
+
+    Args:
+        bounds: name -> (low, high); the order of the mapping is the parameter order.
+    """
+
+    kind = "uniform"
+
+    def __init__(self, bounds: Bounds) -> None:
+        self._set_bounds(bounds)
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        return rng.uniform(self.lower, self.upper, size=(_check_count(n), self.ndim))
+
+    def logpdf(self, x: np.ndarray) -> np.ndarray:
+        points = self._points(x)
+        density = -np.log(self.upper - self.lower).sum()
+        inside = ((points >= self.lower) & (points <= self.upper)).all(axis=1)
+        return np.where(inside, density, -np.inf)
+
+    def extended(self, bounds: Bounds) -> UniformPrior:
+        """This box with more parameters appended (e.g. output-noise scales)."""
+        clash = sorted(set(bounds) & set(self.names))
+        if clash:
+            raise ValueError(f"parameters {clash} are already in the prior")
+        return UniformPrior({**self.bounds, **bounds})
+
+    def to_dataset(self) -> xr.Dataset:
+        return self._bounds_dataset()
+
+    @classmethod
+    def from_dataset(cls, dataset: xr.Dataset) -> UniformPrior:
+        """Inverse of :meth:`to_dataset`."""
+        return cls(_bounds_from_dataset(dataset))
+
+
+def _bounds_from_dataset(dataset: xr.Dataset) -> dict[str, tuple[float, float]]:
+    return {
+        str(name): (float(low), float(high))
+        for name, low, high in zip(
+            dataset["parameter"].values,
+            dataset["lower"].values,
+            dataset["upper"].values,
+            strict=True,
+        )
+    }
+
+
+def _samples_matrix(samples: object, names: Sequence[str]) -> np.ndarray:
+    """Samples as an (n, d) array in ``names`` order, from an array, a mapping or a Dataset."""
+    if isinstance(samples, xr.DataTree):
+        samples = samples["posterior"].to_dataset()
+    if isinstance(samples, xr.Dataset | Mapping):
+        missing = [name for name in names if name not in samples]
+        if missing:
+            raise ValueError(f"samples lack parameter(s) {missing}; the bounds name {list(names)}")
+        return np.column_stack([np.asarray(samples[name], dtype=float).ravel() for name in names])
+    matrix = np.asarray(samples, dtype=float)
+    if matrix.ndim != 2 or matrix.shape[1] != len(names):
+        raise ValueError(
+            f"samples must have shape (n, {len(names)}) for parameters {list(names)}, "
+            f"got {matrix.shape}"
+        )
+    return matrix
+
+
+class GMMPrior(Prior):
+    """A Gaussian mixture in the logit space of the bounds (see the module docstring).
+
+    Build it with :meth:`fit`; the constructor takes fitted parameters.
+
+    Args:
+        bounds: name -> (low, high), physical units.
+        weights: mixture weights (k,), summing to 1.
+        means: component means in logit space (k, d).
+        covariances: component covariances in logit space (k, d, d).
+    """
+
+    kind = "gmm"
+
+    def __init__(
+        self, bounds: Bounds, weights: np.ndarray, means: np.ndarray, covariances: np.ndarray
+    ) -> None:
+        self._set_bounds(bounds)
+        self.weights = np.asarray(weights, dtype=float)
+        self.means = np.asarray(means, dtype=float)
+        self.covariances = np.asarray(covariances, dtype=float)
+        k, d = self.weights.size, self.ndim
+        if self.means.shape != (k, d) or self.covariances.shape != (k, d, d):
+            raise ValueError(
+                f"mixture of {k} components over {d} parameters needs means ({k}, {d}) and "
+                f"covariances ({k}, {d}, {d}); got {self.means.shape} and {self.covariances.shape}"
+            )
+        if not np.isclose(self.weights.sum(), 1.0) or (self.weights < 0).any():
+            raise ValueError(f"mixture weights must be >= 0 and sum to 1, got {self.weights}")
+        self._cholesky = np.linalg.cholesky(self.covariances)
+        self._log_det = 2 * np.log(np.diagonal(self._cholesky, axis1=1, axis2=2)).sum(axis=1)
+
+    @property
+    def n_components(self) -> int:
+        """Number of mixture components."""
+        return self.weights.size
+
+    @classmethod
+    def fit(
+        cls,
+        samples: object,
+        bounds: Bounds | Prior,
+        *,
+        max_components: int = 5,
+        seed: int | None = None,
+    ) -> GMMPrior:
+        """Fit a mixture to samples, choosing 1..max_components components by BIC.
+
+        Args:
+            samples: an array (n, d) in the order of ``bounds``, a mapping name -> values, a
+                Dataset (e.g. a posterior with chain and draw dims) or a DataTree (its
+                posterior group).
+            bounds: name -> (low, high), or a prior whose bounds to use.
+            max_components: largest number of components tried.
+            seed: seeds scikit-learn's initialisation (same seed, same fit).
+        """
+        checked = validate_bounds(bounds.bounds if isinstance(bounds, Prior) else bounds)
+        names = list(checked)
+        if int(max_components) != max_components or max_components < 1:
+            raise ValueError(f"max_components must be a positive integer, got {max_components}")
+        matrix = _samples_matrix(samples, names)
+        if matrix.shape[0] < 2:
+            raise ValueError(f"a mixture needs at least 2 samples, got {matrix.shape[0]}")
+        if not np.isfinite(matrix).all():
+            raise ValueError("samples contain NaN or infinite values")
+        lower = np.array([low for low, _ in checked.values()])
+        upper = np.array([high for _, high in checked.values()])
+        outside = (matrix < lower) | (matrix > upper)
+        if outside.any():
+            column = int(np.flatnonzero(outside.any(axis=0))[0])
+            raise ValueError(
+                f"{int(outside[:, column].sum())} sample(s) of {names[column]!r} lie outside its "
+                f"bounds [{lower[column]}, {upper[column]}]"
+            )
+        fraction = np.clip((matrix - lower) / (upper - lower), _EDGE, 1 - _EDGE)
+        unbounded = logit(fraction)
+        best = None
+        for k in range(1, min(int(max_components), matrix.shape[0]) + 1):
+            mixture = GaussianMixture(n_components=k, covariance_type="full", random_state=seed)
+            mixture.fit(unbounded)
+            score = mixture.bic(unbounded)
+            if best is None or score < best[0]:
+                best = (score, mixture)
+        mixture = best[1]
+        return cls(checked, mixture.weights_, mixture.means_, mixture.covariances_)
+
+    def _log_unbounded_density(self, unbounded: np.ndarray) -> np.ndarray:
+        terms = np.empty((unbounded.shape[0], self.n_components))
+        d = self.ndim
+        for j in range(self.n_components):
+            centred = unbounded - self.means[j]
+            whitened = np.linalg.solve(self._cholesky[j], centred.T)
+            terms[:, j] = (
+                np.log(self.weights[j])
+                - 0.5 * (whitened**2).sum(axis=0)
+                - 0.5 * (d * np.log(2 * np.pi) + self._log_det[j])
+            )
+        return logsumexp(terms, axis=1)
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        n = _check_count(n)
+        components = rng.choice(self.n_components, size=n, p=self.weights)
+        normal = rng.standard_normal((n, self.ndim))
+        unbounded = self.means[components] + np.einsum(
+            "nij,nj->ni", self._cholesky[components], normal
+        )
+        return self.lower + (self.upper - self.lower) * expit(unbounded)
+
+    def logpdf(self, x: np.ndarray) -> np.ndarray:
+        points = self._points(x)
+        inside = ((points > self.lower) & (points < self.upper)).all(axis=1)
+        result = np.full(points.shape[0], -np.inf)
+        if inside.any():
+            width = self.upper - self.lower
+            fraction = (points[inside] - self.lower) / width
+            log_jacobian = -(np.log(width) + np.log(fraction) + np.log1p(-fraction)).sum(axis=1)
+            result[inside] = self._log_unbounded_density(logit(fraction)) + log_jacobian
+        return result
+
+    def to_dataset(self) -> xr.Dataset:
+        dataset = self._bounds_dataset()
+        dataset["weights"] = ("component", self.weights)
+        dataset["means"] = (("component", "parameter"), self.means, {"space": "logit"})
+        dataset["covariances"] = (
+            ("component", "parameter", "parameter_"),
+            self.covariances,
+            {"space": "logit"},
+        )
+        return dataset
+
+    @classmethod
+    def from_dataset(cls, dataset: xr.Dataset) -> GMMPrior:
+        """Inverse of :meth:`to_dataset`."""
+        return cls(
+            _bounds_from_dataset(dataset),
+            dataset["weights"].values,
+            dataset["means"].values,
+            dataset["covariances"].values,
+        )
+
+    def __repr__(self) -> str:
+        return f"GMMPrior({self.n_components} components over {list(self.names)})"
+
+
+PRIOR_KINDS: dict[str, type[Prior]] = {"uniform": UniformPrior, "gmm": GMMPrior}
+
+
+def prior_from_dataset(dataset: xr.Dataset) -> Prior:
+    """The prior a Dataset from ``Prior.to_dataset`` describes."""
+    kind = dataset.attrs.get("kind")
+    if kind not in PRIOR_KINDS:
+        raise ValueError(f"unknown prior kind {kind!r}; expected one of {list(PRIOR_KINDS)}")
+    return PRIOR_KINDS[kind].from_dataset(dataset)
+
+
+def load_prior(path: str | Path) -> Prior:
+    """Read a prior written by ``Prior.save``."""
+    with xr.open_dataset(path, engine="h5netcdf") as dataset:
+        return prior_from_dataset(dataset.load())

@@ -1,0 +1,135 @@
+"""Uniform and bounded-GMM priors: bounds respected, densities normalised, disk round trip."""
+
+import numpy as np
+import pytest
+import xarray as xr
+from scipy import stats
+from scipy.integrate import trapezoid
+from scipy.special import expit, logit
+
+from pymc_vcc.priors import GMMPrior, UniformPrior, load_prior, validate_bounds
+
+BOUNDS = {"M0": (0.9, 2.2), "CF_VOL": (0.5, 1.5)}
+
+
+@pytest.mark.parametrize(
+    ("bounds", "message"),
+    [
+        ({"M0": (2.2, 0.9)}, "bounds of 'M0' need low < high, got low=2.2 >= high=0.9"),
+        ({"M0": (1.0, 1.0)}, "low < high"),
+        ({"M0": (0.0, np.inf)}, "bounds of 'M0' must be finite"),
+        ({"M0": (0.0, np.nan)}, "must be finite"),
+        ({"M0": (1.0,)}, "must be a pair"),
+        ({}, "non-empty mapping"),
+        ({"": (0, 1)}, "non-empty strings"),
+    ],
+)
+def test_bad_bounds_are_clear_errors(bounds, message):
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        validate_bounds(bounds)
+    with pytest.raises(ValueError):
+        UniformPrior(bounds)
+
+
+def test_uniform_prior_draws_inside_its_box_with_the_right_density():
+    prior = UniformPrior(BOUNDS)
+    draws = prior.sample(10_000, np.random.default_rng(0))
+    assert draws.shape == (10_000, 2) and prior.names == ("M0", "CF_VOL")
+    assert (draws >= prior.lower).all() and (draws <= prior.upper).all()
+    np.testing.assert_allclose(draws.mean(axis=0), [1.55, 1.0], atol=0.02)
+    assert prior.logpdf([1.0, 1.0])[0] == pytest.approx(-np.log(1.3 * 1.0))
+    assert prior.logpdf([[3.0, 1.0]])[0] == -np.inf
+    extended = prior.extended({"nu_TD": (0.0, 0.05)})
+    assert extended.names == ("M0", "CF_VOL", "nu_TD")
+    with pytest.raises(ValueError, match=r"\['M0'\] are already in the prior"):
+        prior.extended({"M0": (1.0, 2.0)})
+
+
+def _bimodal_near_a_bound(n, rng):
+    """A posterior-like sample with one mode hugging the lower bound of M0."""
+    first = np.column_stack([rng.normal(0.95, 0.02, n), rng.normal(0.7, 0.05, n)])
+    second = np.column_stack([rng.normal(1.8, 0.1, n), rng.normal(1.2, 0.1, n)])
+    sample = np.vstack([first, second])
+    return np.clip(sample, [0.9 + 1e-6, 0.5 + 1e-6], [2.2 - 1e-6, 1.5 - 1e-6])
+
+
+def test_gmm_chooses_components_by_bic():
+    rng = np.random.default_rng(1)
+    assert GMMPrior.fit(_bimodal_near_a_bound(1500, rng), BOUNDS, seed=0).n_components >= 2
+    unimodal = np.column_stack([rng.normal(1.5, 0.05, 3000), rng.normal(1.0, 0.05, 3000)])
+    assert GMMPrior.fit(unimodal, BOUNDS, seed=0).n_components == 1
+    assert GMMPrior.fit(unimodal, BOUNDS, max_components=1, seed=0).n_components == 1
+
+
+def test_gmm_draws_always_respect_the_bounds_and_reproduce_the_sample():
+    rng = np.random.default_rng(2)
+    sample = _bimodal_near_a_bound(2000, rng)
+    prior = GMMPrior.fit(sample, BOUNDS, seed=0)
+    draws = prior.sample(50_000, np.random.default_rng(3))
+    assert (draws > prior.lower).all() and (draws < prior.upper).all()
+    np.testing.assert_allclose(draws.mean(axis=0), sample.mean(axis=0), atol=0.01)
+    np.testing.assert_allclose(draws.std(axis=0), sample.std(axis=0), rtol=0.03)
+    assert abs((draws[:, 0] < 1.2).mean() - 0.5) < 0.02  # mode weights kept
+
+
+def test_gmm_logpdf_is_the_physical_density_with_the_logit_jacobian():
+    rng = np.random.default_rng(4)
+    prior = GMMPrior.fit(_bimodal_near_a_bound(1000, rng), BOUNDS, seed=0)
+    # normalised in the physical space: quadrature nodes dense near the bounds (logit-spaced)
+    nodes = [low + (high - low) * expit(np.linspace(-18, 18, 901)) for low, high in BOUNDS.values()]
+    grid = np.stack(np.meshgrid(*nodes, indexing="ij"), axis=-1).reshape(-1, 2)
+    density = np.exp(prior.logpdf(grid)).reshape(901, 901)
+    total = trapezoid(trapezoid(density, nodes[1], axis=1), nodes[0])
+    assert total == pytest.approx(1.0, abs=1e-3)
+    # equal to the mixture density in logit space plus the log-Jacobian, computed independently
+    points = prior.sample(50, np.random.default_rng(5))
+    fraction = (points - prior.lower) / (prior.upper - prior.lower)
+    mixture = sum(
+        w * stats.multivariate_normal(m, c).pdf(logit(fraction))
+        for w, m, c in zip(prior.weights, prior.means, prior.covariances, strict=True)
+    )
+    jacobian = np.prod(1 / ((prior.upper - prior.lower) * fraction * (1 - fraction)), axis=1)
+    np.testing.assert_allclose(prior.logpdf(points), np.log(mixture * jacobian), rtol=1e-10)
+    assert prior.logpdf([0.9, 1.0])[0] == -np.inf and prior.logpdf([1.0, 1.6])[0] == -np.inf
+
+
+@pytest.mark.parametrize("make", ["uniform", "gmm"])
+def test_priors_round_trip_through_netcdf(make, tmp_path):
+    rng = np.random.default_rng(6)
+    prior = (
+        UniformPrior(BOUNDS)
+        if make == "uniform"
+        else GMMPrior.fit(_bimodal_near_a_bound(500, rng), BOUNDS, seed=0)
+    )
+    prior.save(tmp_path / "prior.nc")
+    loaded = load_prior(tmp_path / "prior.nc")
+    assert type(loaded) is type(prior) and loaded.bounds == prior.bounds
+    points = prior.sample(20, np.random.default_rng(7))
+    np.testing.assert_array_equal(loaded.sample(20, np.random.default_rng(7)), points)
+    np.testing.assert_array_equal(loaded.logpdf(points), prior.logpdf(points))
+
+
+def test_gmm_fits_posterior_datasets_and_mappings_alike():
+    rng = np.random.default_rng(8)
+    sample = _bimodal_near_a_bound(300, rng)
+    posterior = xr.Dataset(
+        {name: (("chain", "draw"), sample[:, j][None, :]) for j, name in enumerate(BOUNDS)}
+    )
+    from_dataset = GMMPrior.fit(posterior, BOUNDS, seed=0)
+    from_mapping = GMMPrior.fit({"CF_VOL": sample[:, 1], "M0": sample[:, 0]}, BOUNDS, seed=0)
+    np.testing.assert_allclose(from_dataset.means, from_mapping.means)
+    from_tree = GMMPrior.fit(xr.DataTree.from_dict({"posterior": posterior}), BOUNDS, seed=0)
+    np.testing.assert_allclose(from_tree.means, from_mapping.means)
+
+
+def test_gmm_fit_rejects_bad_samples():
+    with pytest.raises(ValueError, match=r"sample\(s\) of 'M0' lie outside its bounds"):
+        GMMPrior.fit(np.array([[0.5, 1.0], [1.0, 1.0]]), BOUNDS)
+    with pytest.raises(ValueError, match=r"lack parameter\(s\) \['CF_VOL'\]"):
+        GMMPrior.fit({"M0": np.ones(5)}, BOUNDS)
+    with pytest.raises(ValueError, match=r"shape \(n, 2\)"):
+        GMMPrior.fit(np.ones((5, 3)), BOUNDS)
+    with pytest.raises(ValueError, match="max_components must be a positive integer"):
+        GMMPrior.fit(np.ones((5, 2)), BOUNDS, max_components=0)
+    with pytest.raises(ValueError, match="NaN"):
+        GMMPrior.fit(np.array([[1.0, np.nan], [1.0, 1.0]]), BOUNDS)
