@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from pymc_vcc.components.compressor import compressor, volumetric_efficiency
+from pymc_vcc.components.density import cell_state
 from pymc_vcc.components.expansion_valve import valve_mass_flow
 from pymc_vcc.components.fan import air_capacity_rate, air_inlet_temperature, fan_operating_point
 from pymc_vcc.components.heat_exchanger import zone_derivatives
@@ -265,12 +266,12 @@ def evaluate(y, u, c, tables, dydt, out):
     mass_cond = 0.0
     mass_evap = 0.0
     for i in range(nc):
-        T_c[i], rho_c[i], rp_c[i], rh_c[i], x_c[i] = state(tables, p_c, h_zc[i])
+        T_c[i], rho_c[i], rp_c[i], rh_c[i], x_c[i] = cell_state(tables, p_c, h_zc[i])
         mass += vol_c[i] * rho_c[i]
         if i < n:
             mass_cond += vol_c[i] * rho_c[i]
     for i in range(ne):
-        T_e[i], rho_e[i], rp_e[i], rh_e[i], x_e[i] = state(tables, p_e, h_ze[i])
+        T_e[i], rho_e[i], rp_e[i], rh_e[i], x_e[i] = cell_state(tables, p_e, h_ze[i])
         mass += vol_e[i] * rho_e[i]
         if i < n:
             mass_evap += vol_e[i] * rho_e[i]
@@ -284,14 +285,14 @@ def evaluate(y, u, c, tables, dydt, out):
     # ---- suction tank, suction pressure, compressor
     h_vap_e = saturation_state(tables, p_e)[2]
     h_suc = tank_outlet_enthalpy(h_ze[n + 1], h_vap_e, _TANK_WIDTH)
-    rho_out = state(tables, p_e, h_suc)[1]
+    rho_out = cell_state(tables, p_e, h_suc)[1]
     eta_guess = volumetric_efficiency(p_c / p_e, c[C_CLEARANCE], c[C_EXPONENT], c[C_CF_VOL])
     m_guess = eta_guess * rho_out * c[C_DISPLACEMENT] * speed
     dp_suction = pressure_drop(c[C_K_EVAP], m_guess, rho_mean_e, _FLOW_EPS) + pressure_drop(
         c[C_K_VAP], m_guess, rho_out, _FLOW_EPS
     )
     p_s = p_e - dp_suction
-    T_s, rho_s = state(tables, p_s, h_suc)[:2]
+    T_s, rho_s = cell_state(tables, p_s, h_suc)[:2]
     p_d = p_c + pressure_drop(c[C_K_COND], m_guess, rho_mean_c, _FLOW_EPS)
     m_comp, h_d, w_comp, w_ref = compressor(
         tables,
@@ -441,11 +442,11 @@ def total_mass(y, c, tables):
     i_pe = 2 * n + 2
     mass = 0.0
     for i in range(n):
-        mass += c[C_V_COND] * state(tables, y[0], y[1 + i])[1]
-        mass += c[C_V_EVAP] * state(tables, y[i_pe], y[i_pe + 1 + i])[1]
-    mass += c[C_V_LIQ] * state(tables, y[0], y[n + 1])[1]
-    mass += c[C_V_VAP] * state(tables, y[i_pe], y[3 * n + 3])[1]
-    mass += c[C_V_TANK] * state(tables, y[i_pe], y[3 * n + 4])[1]
+        mass += c[C_V_COND] * cell_state(tables, y[0], y[1 + i])[1]
+        mass += c[C_V_EVAP] * cell_state(tables, y[i_pe], y[i_pe + 1 + i])[1]
+    mass += c[C_V_LIQ] * cell_state(tables, y[0], y[n + 1])[1]
+    mass += c[C_V_VAP] * cell_state(tables, y[i_pe], y[3 * n + 3])[1]
+    mass += c[C_V_TANK] * cell_state(tables, y[i_pe], y[3 * n + 4])[1]
     return mass
 
 
