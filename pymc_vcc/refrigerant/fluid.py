@@ -168,10 +168,10 @@ class Refrigerant:
     def props(self, p: ArrayLike, h: ArrayLike) -> Properties:
         """T, rho, drho_dp, drho_dh, quality and s at pressure p (Pa) and enthalpy h (J/kg)."""
         shape, (p_flat, h_flat) = _flat(p, h)
-        self._check_enthalpy(p_flat, h_flat)
-        rows = kernels.state_array(self.tables, p_flat, h_flat)
-        s = kernels.entropy_array(self.tables, p_flat, h_flat)
-        return Properties(*(_shaped(row, shape) for row in rows), s=_shaped(s, shape))
+        rows = kernels.props_array(self.tables, p_flat, h_flat)
+        if np.isnan(rows[0]).any():  # the kernels flag states outside the tables with NaN
+            self._check_enthalpy(p_flat, h_flat)
+        return Properties(*(_shaped(row, shape) for row in rows))
 
     def saturation(self, p: ArrayLike) -> Saturation:
         """T_sat, h_l, h_v, rho_l, rho_v at pressure p (Pa)."""

@@ -391,6 +391,19 @@ def state_array(tables: PropertyTables, p: np.ndarray, h: np.ndarray) -> np.ndar
 
 
 @njit(cache=True)
+def props_array(tables: PropertyTables, p: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """:func:`state` and :func:`entropy` over 1-D arrays: rows T, rho, drho_dp, drho_dh, x, s.
+
+    Shape (6, n); NaN columns where (p, h) is outside the tables.
+    """
+    out = np.empty((6, p.size))
+    for k in range(p.size):
+        out[0, k], out[1, k], out[2, k], out[3, k], out[4, k] = state(tables, p[k], h[k])
+        out[5, k] = entropy(tables, p[k], h[k])
+    return out
+
+
+@njit(cache=True)
 def entropy_array(tables: PropertyTables, p: np.ndarray, h: np.ndarray) -> np.ndarray:
     """:func:`entropy` over 1-D arrays of equal length, J/(kg K)."""
     out = np.empty(p.size)
