@@ -1,0 +1,399 @@
+"""SMC-ABC with the simulations of each stage run as one parallel batch.
+
+``pm.sample_smc`` evaluates the (pseudo-)likelihood of its particles one after another in a Python
+loop, and its ``cores`` only run whole independent SMC runs side by side. With a simulator that
+costs a second, that loop is the bottleneck. :class:`ParallelIMH` is PyMC's independent
+Metropolis–Hastings SMC kernel with the likelihood evaluated differently: where the stock
+kernel calls a compiled likelihood per particle (running the simulator inside PyTensor), it
+
+1. evaluates the parameters of every ``pm.Simulator`` node for all particles (compiled, cheap),
+2. runs all their simulations in one batch through an executor of
+   :mod:`pymc_vcc.executors` (serial, local processes or Dask), each with its own random
+   stream from ``SeedSequence.spawn`` (results do not depend on which worker ran them),
+3. computes the log-likelihoods from the simulated outputs (the node's distance kernel and any
+   other observed terms, compiled), with −inf for a failed simulation: zero likelihood, so
+   the particle is dropped at resampling or the proposal rejected, never a crash.
+
+Everything else (tempering, resampling, proposals, acceptance) is the stock IMH kernel, drawing
+from the same random generator in the same order: with a simulator that does not use its
+random stream, the same seed gives the same posterior as the stock kernel, bit for bit.
+
+Simulations run and failed per stage are recorded in ``sample_stats`` (``simulations``,
+``failed_simulations``, ``stage_seconds``) and their totals in its attributes.
+
+Why one chain by default (:func:`sample_smc_abc`): an SMC stage already offers ``draws``
+independent simulations to run in parallel, so one chain keeps every worker busy; each extra
+chain is a whole second SMC run (as many simulations again) that improves the posterior less
+than doubling ``draws`` would. PyMC's own parallel chains run in daemonic processes, which
+cannot start worker processes of their own, so a kernel sent to them simulates serially.
+Run several chains (for convergence diagnostics) one after another with ``cores=1``: each
+uses the whole executor.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import warnings
+from collections import Counter
+from collections.abc import Callable, Sequence
+from contextlib import contextmanager
+from functools import partial
+from typing import Any, ClassVar
+
+import numpy as np
+import pymc as pm
+import pytensor.tensor as pt
+from pymc.blocking import DictToArrayBijection
+from pymc.distributions.simulator import SimulatorRV
+from pymc.model import Model, modelcontext
+from pymc.pytensorf import compile as compile_pytensor
+from pymc.pytensorf import floatX, join_nonshared_inputs, make_shared_replacements
+from pymc.smc.kernels import IMH, Pearson
+from pytensor.tensor.type_other import NoneTypeT
+from xarray import DataTree
+
+from pymc_vcc.executors import Executor, ExecutorKind, SerialExecutor, make_executor
+from pymc_vcc.outcomes import OK, SimulationOutcome
+from pymc_vcc.pymc_model import SimulatorFunction
+
+logger = logging.getLogger(__name__)
+
+_MAX_REASONS = 5
+
+
+def _generic_outcome(function: Callable[..., Any], rng, params, size) -> SimulationOutcome:
+    """Run a ``pm.Simulator`` random function, capturing exceptions and non-finite outputs."""
+    start = time.perf_counter()
+    try:
+        values = np.asarray(function(rng, *params, size), dtype=float)
+    except Exception as exc:
+        reason = f"{type(exc).__name__}: {exc}"[:300]
+        return SimulationOutcome(None, "exception", reason, time.perf_counter() - start)
+    elapsed = time.perf_counter() - start
+    if not np.isfinite(values).all():
+        count = int((~np.isfinite(values)).sum())
+        return SimulationOutcome(None, "non-finite", f"{count} non-finite value(s)", elapsed)
+    return SimulationOutcome(values, OK, "", elapsed)
+
+
+def _simulate(functions: Sequence[Callable[..., Any]], task: tuple) -> SimulationOutcome:
+    """Worker side: one simulation of one ``pm.Simulator`` node, with its own random stream."""
+    node, seed, size, params = task
+    function = functions[node]
+    rng = np.random.default_rng(seed)
+    if isinstance(function, SimulatorFunction):
+        return function.outcome(rng, *params)
+    return _generic_outcome(function, rng, params, None if size is None else tuple(size))
+
+
+class _BatchLikelihood:
+    """The model's likelihood with its ``pm.Simulator`` nodes evaluated outside PyTensor.
+
+    Compiles two functions of the flat particle vector (in the order of ``value_vars``): the
+    random-function inputs (size and parameters) of every simulator node, and the total
+    log-likelihood given the simulated outputs of every node (distance kernels, plus the
+    log-probability of any other observed variable and of potentials).
+    """
+
+    def __init__(self, model: Model, value_vars: list, compile_kwargs: dict | None) -> None:
+        nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
+        if not nodes:
+            raise ValueError(
+                "the model has no pm.Simulator node; ParallelIMH batches simulations only "
+                "(use pm.sample_smc's default kernel for models with ordinary likelihoods)"
+            )
+        others = [rv for rv in model.observed_RVs if rv not in nodes]
+        self.functions = tuple(type(rv.owner.op).fn for rv in nodes)
+        self.n_nodes = len(nodes)
+
+        node_inputs: list = []
+        self._slices = []
+        for rv in nodes:
+            size = rv.owner.op.size_param(rv.owner)
+            if size is None or isinstance(size.type, NoneTypeT):
+                size = pt.constant(np.zeros(0, dtype="int64"))  # no size: an empty vector
+            params = list(rv.owner.op.dist_params(rv.owner))
+            first = len(node_inputs)
+            node_inputs += [size, *params]
+            self._slices.append(slice(first, len(node_inputs)))
+        node_inputs = model.replace_rvs_by_values(node_inputs)
+
+        simulated = [rv.type() for rv in nodes]
+        terms = []
+        for rv, placeholder in zip(nodes, simulated, strict=True):
+            op = rv.owner.op
+            observed = model.rvs_to_values[rv]
+            terms.append(
+                pt.sum(op.distance(op.epsilon, op.sum_stat(observed), op.sum_stat(placeholder)))
+            )
+        other_terms = model.logp(vars=others) if others else pt.constant(0.0)
+        loglik = pt.sum(pt.stack(terms)) + other_terms + model.potentiallogp
+
+        point = model.initial_point()
+        shared = make_shared_replacements(point, value_vars, model)
+        outputs, flat = join_nonshared_inputs(point, [loglik, *node_inputs], value_vars, shared)
+        kwargs = {**(compile_kwargs or {}), "on_unused_input": "ignore"}
+        self._loglik = compile_pytensor([flat, *simulated], outputs[0], **kwargs)
+        self._inputs = compile_pytensor([flat], outputs[1:], **kwargs)
+        self._loglik.trust_input = True
+        self._inputs.trust_input = True
+        self._dtypes = [rv.type.dtype for rv in nodes]
+
+    def tasks(self, points: np.ndarray, seeds: Sequence[np.random.SeedSequence]) -> list[tuple]:
+        """One task (node, seed, size, params) per node and point, node-major."""
+        inputs = [self._inputs(point) for point in points]
+        tasks = []
+        for node, where in enumerate(self._slices):
+            for index, values in enumerate(inputs):
+                size, *params = values[where]
+                seed = seeds[node * len(points) + index]
+                tasks.append((node, seed, None if size.size == 0 else size, params))
+        return tasks
+
+    def evaluate(self, points: np.ndarray, outcomes: Sequence[SimulationOutcome]) -> np.ndarray:
+        """Log-likelihood of each point from its nodes' outcomes; −inf where any failed."""
+        n = len(points)
+        loglik = np.full(n, -np.inf)
+        for index, point in enumerate(points):
+            runs = [outcomes[node * n + index] for node in range(self.n_nodes)]
+            if all(run.ok for run in runs):
+                simulated = [
+                    np.asarray(run.values, dtype=dtype)
+                    for run, dtype in zip(runs, self._dtypes, strict=True)
+                ]
+                loglik[index] = float(self._loglik(point, *simulated))
+        loglik[np.isnan(loglik)] = -np.inf
+        return loglik
+
+
+class ParallelIMH(IMH):
+    """PyMC's IMH SMC kernel with the simulations of all particles run as one parallel batch.
+
+    Use it as ``pm.sample_smc(kernel=ParallelIMH, executor=ex, chains=1, ...)`` on a model
+    with ``pm.Simulator`` nodes (e.g. from :func:`pymc_vcc.pymc_model.add_simulator`), or
+    through :func:`sample_smc_abc`, which picks defaults suited to expensive simulators.
+
+    Args:
+        executor: where simulations run, an executor of :mod:`pymc_vcc.executors` (the caller
+            opens and closes it); None runs them in this process.
+        correlation_threshold: as for ``pymc.smc.kernels.IMH``.
+        **kwargs: the stock kernel's arguments (``draws``, ``model``, ``threshold``, ...).
+    """
+
+    stats_dtypes_shapes: ClassVar[dict[str, tuple[type, list]]] = {
+        **IMH.stats_dtypes_shapes,
+        "simulations": (int, []),
+        "failed_simulations": (int, []),
+        "stage_seconds": (float, []),
+    }
+
+    def __init__(
+        self, *args, executor: Executor | None = None, correlation_threshold=0.01, **kwargs
+    ) -> None:
+        compile_kwargs = dict(kwargs.get("compile_kwargs") or {})
+        super().__init__(*args, correlation_threshold=correlation_threshold, **kwargs)
+        if executor is not None and not isinstance(executor, Executor):
+            raise TypeError(
+                f"executor must be a pymc_vcc.executors.Executor (make_executor(...)) or None, "
+                f"got {type(executor).__name__}; sample_smc_abc also accepts a kind name"
+            )
+        self.executor: Executor = SerialExecutor() if executor is None else executor
+        self._likelihood = _BatchLikelihood(
+            modelcontext(kwargs.get("model")), self.variables, compile_kwargs
+        )
+        self._seeds = np.random.SeedSequence()
+        self._reset_counters()
+
+    def _reset_counters(self) -> None:
+        self._stage_simulations = 0
+        self._stage_failures = 0
+        self._stage_start = time.perf_counter()
+        self.total_simulations = 0
+        self.total_failures = 0
+        self.failure_kinds: Counter[str] = Counter()
+        self.failure_reasons: list[str] = []
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        if not isinstance(self.executor, SerialExecutor):
+            warnings.warn(
+                "pm.sample_smc runs chains in separate (daemonic) processes here (cores > 1 and "
+                "chains > 1); they cannot use the executor, so each chain simulates its "
+                "particles one after another. Pass cores=1 (chains then run one after another, "
+                "each using the executor) or use pymc_vcc.smc.sample_smc_abc.",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+        state["executor"] = SerialExecutor()
+        return state
+
+    def initialize(self, start: dict | None, rng: np.random.Generator) -> None:
+        # Simulation streams are children of the chain's seed: they neither consume nor shift
+        # the chain generator that drives proposals and resampling.
+        self._seeds = rng.bit_generator.seed_seq.spawn(1)[0]
+        self._reset_counters()
+        super().initialize(start, rng)
+
+    def _simulated_loglik(self, points: np.ndarray, prior_logp: np.ndarray) -> np.ndarray:
+        """Log-likelihood of points, simulating (in one batch) only those the prior allows."""
+        loglik = np.full(len(points), -np.inf)
+        allowed = np.flatnonzero(np.isfinite(prior_logp))
+        if allowed.size == 0:
+            return loglik
+        batch = points[allowed]
+        seeds = self._seeds.spawn(len(batch) * self._likelihood.n_nodes)
+        tasks = self._likelihood.tasks(batch, seeds)
+        outcomes = self.executor.map(partial(_simulate, self._likelihood.functions), tasks)
+        for outcome in outcomes:
+            if not outcome.ok:
+                self.failure_kinds[outcome.status] += 1
+                if len(self.failure_reasons) < _MAX_REASONS:
+                    self.failure_reasons.append(f"{outcome.status}: {outcome.reason}")
+        failures = sum(not outcome.ok for outcome in outcomes)
+        self._stage_simulations += len(tasks)
+        self._stage_failures += failures
+        self.total_simulations += len(tasks)
+        self.total_failures += failures
+        loglik[allowed] = self._likelihood.evaluate(batch, outcomes)
+        return loglik
+
+    def _initialize_kernel(self) -> None:
+        """Initial particles (prior draws or ``start``) with their prior and likelihood."""
+        population = self.start if self.start else self.initialize_population()
+        particles = [
+            DictToArrayBijection.map({v.name: population[v.name][i] for v in self.variables}).data
+            for i in range(self.draws)
+        ]
+        self.tempered_posterior = np.array(floatX(particles))
+        self.prior_logp = np.array(
+            [self.prior_logp_func(particle) for particle in self.tempered_posterior]
+        ).reshape(-1)
+        self.likelihood_logp = self._simulated_loglik(self.tempered_posterior, self.prior_logp)
+        if not np.isfinite(self.likelihood_logp).any():
+            raise RuntimeError(
+                f"all {self.draws} simulations of the initial population failed or have zero "
+                f"likelihood; failures: {dict(self.failure_kinds)}, e.g. "
+                f"{self.failure_reasons[:2]}. Check the simulator, the prior bounds and epsilon."
+            )
+
+    def mutate(self) -> None:
+        """Independent MH moves, each step's proposals simulated as one batch."""
+        self.n_steps = 1
+        old_correlation = 2
+        correlation = Pearson(self.tempered_posterior)
+        accepted_steps = []
+        while True:
+            log_uniform = np.log(self.rng.random(self.draws))
+            proposal = floatX(self.proposal_dist.rvs(size=self.draws, random_state=self.rng))
+            proposal = proposal.reshape(len(proposal), -1)
+            forward_logp = self.proposal_dist.logpdf(proposal)
+            backward_logp = self.proposal_dist.logpdf(self.tempered_posterior)
+            prior_logp = np.array([self.prior_logp_func(p) for p in proposal]).reshape(-1)
+            loglik = self._simulated_loglik(proposal, prior_logp)
+            proposal_logp = prior_logp + loglik * self.beta
+            accepted = log_uniform < (
+                (proposal_logp + backward_logp) - (self.tempered_posterior_logp + forward_logp)
+            )
+            self.tempered_posterior[accepted] = proposal[accepted]
+            self.tempered_posterior_logp[accepted] = proposal_logp[accepted]
+            self.prior_logp[accepted] = prior_logp[accepted]
+            self.likelihood_logp[accepted] = loglik[accepted]
+            accepted_steps.append(accepted)
+            self.n_steps += 1
+
+            pearson_r = correlation.get(self.tempered_posterior)
+            if np.mean((old_correlation - pearson_r) > self.correlation_threshold) > 0.9:
+                old_correlation = pearson_r
+            else:
+                break
+        self.acc_rate = np.mean(accepted_steps)
+
+    def sample_stats(self) -> dict[str, int | float]:
+        now = time.perf_counter()
+        stats = {
+            **super().sample_stats(),
+            "simulations": self._stage_simulations,
+            "failed_simulations": self._stage_failures,
+            "stage_seconds": now - self._stage_start,
+        }
+        self._stage_simulations = 0
+        self._stage_failures = 0
+        self._stage_start = now
+        return stats
+
+    def sample_settings(self) -> dict[str, int | float | str]:
+        return {
+            **super().sample_settings(),
+            "n_simulations": self.total_simulations,
+            "n_failed_simulations": self.total_failures,
+            "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
+            "failure_examples": " | ".join(self.failure_reasons),
+            "executor": repr(self.executor),
+        }
+
+
+@contextmanager
+def _executor_context(executor: Executor | ExecutorKind | None, n_workers, address):
+    if executor is None or isinstance(executor, Executor):
+        yield executor
+        return
+    with make_executor(executor, n_workers=n_workers, address=address) as opened:
+        yield opened
+
+
+def sample_smc_abc(
+    draws: int = 1000,
+    *,
+    executor: Executor | ExecutorKind | None = "processes",
+    n_workers: int | None = None,
+    address: Any = None,
+    chains: int = 1,
+    random_seed: Any = None,
+    model: Model | None = None,
+    threshold: float = 0.5,
+    correlation_threshold: float = 0.01,
+    progressbar: bool = True,
+    **kwargs: Any,
+) -> DataTree:
+    """SMC-ABC of the current model with :class:`ParallelIMH` and defaults for costly simulators.
+
+    Args:
+        draws: particles per stage (and posterior draws per chain).
+        executor: an open executor, or a kind (``"serial"``, ``"processes"``, ``"dask"``) to
+            open for this call; None: in this process.
+        n_workers, address: passed to :func:`pymc_vcc.executors.make_executor` for a kind.
+        chains: independent SMC runs, one after another, each using the whole executor
+            (default 1: see the module docstring for why).
+        random_seed: seeds everything (proposals, resampling and every simulation).
+        model: the PyMC model (default: the current context).
+        threshold, correlation_threshold: as for ``pm.sample_smc``'s IMH kernel.
+        progressbar: show PyMC's progress bar.
+        **kwargs: other ``pm.sample_smc`` arguments (``start``, ``idata_kwargs``, ...).
+
+    Returns:
+        The DataTree of ``pm.sample_smc`` (``posterior``, ``sample_stats`` with the
+        simulation counts, ``observed_data``).
+    """
+    if int(chains) != chains or chains < 1:
+        raise ValueError(f"chains must be a positive integer, got {chains}")
+    if int(draws) != draws or draws < 2:
+        raise ValueError(f"draws must be an integer >= 2, got {draws}")
+    kwargs.setdefault("compute_convergence_checks", chains > 1)
+    with _executor_context(executor, n_workers, address) as opened:
+        return pm.sample_smc(
+            draws=int(draws),
+            kernel=ParallelIMH,
+            chains=int(chains),
+            cores=1,
+            random_seed=random_seed,
+            model=modelcontext(model),
+            progressbar=progressbar,
+            executor=opened,
+            threshold=threshold,
+            correlation_threshold=correlation_threshold,
+            **kwargs,
+        )
+
+
+__all__ = ["ParallelIMH", "sample_smc_abc"]
