@@ -135,14 +135,16 @@ def _inputs_from_csv_text(text: str, source: str) -> xr.Dataset:
         raise ValueError(f"{source}: the first column must be 'time [s]', got {names[0]!r}")
     if len(set(names)) != len(names):
         raise ValueError(f"{source}: duplicate column names in {names}")
+    rows = [line.split(",") for line in lines[1:]]
+    for number, row in enumerate(rows, start=2):
+        if len(row) != len(header):
+            raise ValueError(
+                f"{source}: every row needs {len(header)} values; line {number} has {len(row)}"
+            )
     try:
-        table = np.array(
-            [[float(cell) for cell in line.split(",")] for line in lines[1:]], dtype=float
-        )
+        table = np.array([[float(cell) for cell in row] for row in rows], dtype=float)
     except ValueError as error:
         raise ValueError(f"{source}: non-numeric value ({error})") from None
-    if table.ndim != 2 or table.shape[1] != len(header):
-        raise ValueError(f"{source}: every row needs {len(header)} values")
     if header[0][1] != "s":
         raise ValueError(f"{source}: time must be in 's', got {header[0][1]!r}")
     specs = {spec.id: spec for spec in INPUTS}

@@ -1,0 +1,91 @@
+"""Input profiles: the built-in step profile, CSV loading and its validation."""
+
+import numpy as np
+import pytest
+
+from pymc_vcc.inputs import (
+    INPUT_IDS,
+    builtin_inputs,
+    constant_inputs,
+    input_segments,
+    load_inputs_csv,
+    make_inputs,
+    window,
+)
+
+HEADER = "time [s],valve_opening [1],compressor_speed [Hz],T_ambient [degC],T_indoor [degC]\n"
+
+
+def test_builtin_profile_steps_every_input_several_times_over_2120_s():
+    inputs = builtin_inputs()
+    assert float(inputs.time[-1]) == 2120.0
+    for name in INPUT_IDS:
+        values = inputs[name].values
+        assert np.count_nonzero(np.diff(values)) >= 3, name
+        assert "units" in inputs[name].attrs
+    assert inputs.T_ambient.attrs["units"] == "K"
+    assert 300.0 < float(inputs.T_ambient[0]) < 315.0
+    first_half = window(inputs, 1060.0)
+    for name in INPUT_IDS:
+        assert np.count_nonzero(np.diff(first_half[name].values)) >= 2, name
+
+
+def test_segments_merge_repeated_rows():
+    inputs = make_inputs(
+        np.array([0.0, 10.0, 20.0, 30.0]),
+        valve_opening=[0.4, 0.4, 0.5, 0.5],
+        compressor_speed=50.0,
+        T_ambient=308.15,
+        T_indoor=300.15,
+    )
+    edges, values = input_segments(inputs)
+    np.testing.assert_array_equal(edges, [0.0, 20.0, 30.0])
+    assert values.shape == (2, 4) and values[1, 0] == 0.5
+
+
+def test_window_cuts_and_keeps_the_held_value():
+    cut = window(builtin_inputs(), 500.0)
+    assert float(cut.time[-1]) == 500.0
+    assert float(cut.valve_opening[-1]) == float(cut.valve_opening[-2])
+    with pytest.raises(ValueError, match="must lie in"):
+        window(builtin_inputs(), 5000.0)
+
+
+def test_csv_round_trip_converts_celsius(tmp_path):
+    path = tmp_path / "profile.csv"
+    path.write_text(HEADER + "0,0.4,55,35,27\n100,0.5,60,30,25\n200,0.5,60,30,25\n")
+    inputs = load_inputs_csv(path)
+    assert float(inputs.T_ambient[0]) == pytest.approx(308.15)
+    assert inputs.compressor_speed.attrs["units"] == "Hz"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (HEADER + "0,0.4,55,35,27\n100,0.4,55,nan,27\n", "T_ambient is NaN at time 100"),
+        (HEADER + "0,0.4,55,35,27\n100,0.4,55,35,27\n50,0.4,55,35,27\n", "strictly increasing"),
+        (HEADER + "5,0.4,55,35,27\n100,0.4,55,35,27\n", "start at 0"),
+        (HEADER.replace("[Hz]", "[rpm]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "'rpm'"),
+        (HEADER.replace("valve_opening", "lev") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "'lev'"),
+        (HEADER.replace("time [s]", "t [s]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "first col"),
+        (HEADER + "0,0.4,55,35,27\n9,1.4,55,35,27\n", r"outside the allowed range"),
+        (HEADER + "0,0.4,55,35\n9,0.4,55,35,27\n", "every row"),
+        ("time [s],valve_opening [1]\n0,0.4\n9,0.4\n", "missing"),
+    ],
+)
+def test_bad_csv_is_a_clear_error(tmp_path, text, message):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message):
+        load_inputs_csv(path)
+
+
+def test_dataset_validation_checks_units():
+    inputs = constant_inputs(
+        100.0, valve_opening=0.4, compressor_speed=55.0, T_ambient=308.15, T_indoor=300.15
+    )
+    inputs.T_indoor.attrs["units"] = "degC"
+    from pymc_vcc.inputs import validate_inputs
+
+    with pytest.raises(ValueError, match="T_indoor must have units 'K'"):
+        validate_inputs(inputs)

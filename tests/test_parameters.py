@@ -1,0 +1,67 @@
+"""Table III parameters: ids, validation of specs and of user parameter mappings."""
+
+import numpy as np
+import pytest
+
+from pymc_vcc.parameters import PARAMETER_IDS, ParameterSpec, parameter_table
+from pymc_vcc.unit import load_unit
+
+
+def test_table_iii_has_26_unique_ids_starting_with_charge():
+    assert len(PARAMETER_IDS) == 26
+    assert len(set(PARAMETER_IDS)) == 26
+    assert PARAMETER_IDS[0] == "M0"
+
+
+def test_builtin_bounds_are_those_of_table_iii():
+    table = load_unit().parameters
+    assert (table["M0"].low, table["M0"].high) == (0.9, 2.2)
+    assert (table["HTC_CTP"].low, table["HTC_CTP"].high) == (500.0, 20000.0)
+    assert (table["L_LIQ"].low, table["L_LIQ"].high) == (14.0, 30.0)
+    assert np.all(table.lows <= table.nominal) and np.all(table.nominal <= table.highs)
+    assert table["FO_SPEED"].unit == "Hz" and table["HTC_EA"].unit == "W/(m2 K)"
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"low": 2.0, "high": 1.0}, "low < high"),
+        ({"low": 1.0, "high": 1.0}, "low < high"),
+        ({"nominal": 5.0}, "outside its bounds"),
+        ({"unit": "g"}, "expected 'kg'"),
+        ({"id": "M_TOTAL"}, "unknown parameter id"),
+        ({"nominal": float("nan")}, "finite"),
+    ],
+)
+def test_bad_specs_are_clear_errors(changes, message):
+    values = {"id": "M0", "name": "charge", "unit": "kg", "low": 0.9, "high": 2.2}
+    values |= {"nominal": 1.3} | changes
+    with pytest.raises(ValueError, match=message):
+        ParameterSpec(**values)
+
+
+def test_missing_parameter_is_named():
+    specs = [spec for spec in load_unit().parameters if spec.id != "CF_LEV"]
+    with pytest.raises(ValueError, match="CF_LEV"):
+        parameter_table(specs)
+
+
+def test_vector_fills_nominal_and_checks_ids_and_bounds():
+    table = load_unit().parameters
+    vector = table.vector({"M0": 1.5})
+    assert vector[0] == 1.5
+    np.testing.assert_array_equal(vector[1:], table.nominal[1:])
+    with pytest.raises(ValueError, match="unknown parameter id 'm0'"):
+        table.vector({"m0": 1.0})
+    with pytest.raises(ValueError, match="outside its bounds"):
+        table.vector({"M0": 3.0}, check_bounds=True)
+    with pytest.raises(ValueError, match="finite"):
+        table.vector({"M0": float("inf")})
+
+
+def test_uniform_draws_stay_in_the_box():
+    table = load_unit().parameters
+    draws = table.sample_uniform(50, np.random.default_rng(1))
+    values = np.array([[d[pid] for pid in PARAMETER_IDS] for d in draws])
+    assert np.all(values >= table.lows) and np.all(values <= table.highs)
+    assert values.std(axis=0).min() > 0

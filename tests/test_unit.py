@@ -1,0 +1,79 @@
+"""Unit descriptions: the built-in unit loads; every kind of bad file is a clear error."""
+
+import tomllib
+from importlib import resources
+
+import pytest
+
+from pymc_vcc.unit import BUILTIN_UNIT, load_unit, unit_from_dict, unit_to_dict
+
+
+def _builtin_dict():
+    text = resources.files("pymc_vcc").joinpath("data", BUILTIN_UNIT).read_text()
+    return tomllib.loads(text)
+
+
+def test_builtin_unit_loads_with_its_numbers():
+    unit = load_unit()
+    assert unit.refrigerant == "R410A"
+    assert unit.discretisation.n_volumes >= 5
+    assert unit.liquid_line.inner_diameter == pytest.approx(4.83e-3)
+    assert len(unit.parameters) == 26
+
+
+def test_round_trip_through_dict():
+    unit = load_unit()
+    assert unit_from_dict(unit_to_dict(unit)) == unit
+
+
+def test_load_from_a_file(tmp_path):
+    path = tmp_path / "unit.toml"
+    path.write_text(resources.files("pymc_vcc").joinpath("data", BUILTIN_UNIT).read_text())
+    assert load_unit(path) == load_unit()
+    with pytest.raises(FileNotFoundError):
+        load_unit(tmp_path / "absent.toml")
+
+
+def _mutated(mutate):
+    data = _builtin_dict()
+    mutate(data)
+    return data
+
+
+@pytest.mark.parametrize(
+    ("mutate", "message"),
+    [
+        (lambda d: d["condenser"].update(fins=3), r"\[condenser\]: unknown key\(s\) \['fins'\]"),
+        (lambda d: d["solver"].pop("rtol"), r"\[solver\]: missing value\(s\) for \['rtol'\]"),
+        (lambda d: d.update(extra={}), r"unknown key\(s\) \['extra'\]"),
+        (lambda d: d["discretisation"].update(n_volumes=0), "positive integer"),
+        (lambda d: d["suction_tank"].update(volume=-1.0), "finite positive"),
+        (lambda d: d["compressor"].update(isentropic_efficiency=1.2), r"fraction in \(0, 1\)"),
+        (lambda d: d["controller"].update(enabled="yes"), "true or false"),
+        (lambda d: d["parameters"]["M0"].update(bounds=[2.2, 0.9]), "low < high"),
+        (lambda d: d["parameters"]["M0"].update(nominal=3.0), "outside its bounds"),
+        (lambda d: d["parameters"]["M0"].pop("nominal"), r"missing value\(s\) for \['nominal'\]"),
+        (lambda d: d["parameters"].pop("L_VAP"), "L_VAP"),
+        (lambda d: d["parameters"].update(X1={}), "X1"),
+        (lambda d: d["unit"].update(refrigerant="R999"), "R999"),
+    ],
+)
+def test_bad_unit_descriptions_are_clear_errors(mutate, message):
+    with pytest.raises(ValueError, match=message):
+        unit_from_dict(_mutated(mutate))
+
+
+def test_invalid_toml_is_reported(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text("[unit\nname = 1")
+    with pytest.raises(ValueError, match="not valid TOML"):
+        load_unit(path)
+
+
+def test_with_changes_validates():
+    unit = load_unit()
+    assert unit.with_changes(discretisation={"n_volumes": 6}).discretisation.n_volumes == 6
+    with pytest.raises(ValueError, match="positive integer"):
+        unit.with_changes(discretisation={"n_volumes": -2})
+    with pytest.raises(ValueError, match="unknown section"):
+        unit.with_changes(nonsense={"a": 1})
