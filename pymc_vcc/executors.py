@@ -24,6 +24,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator
 from concurrent import futures
+from contextlib import contextmanager
 from itertools import islice
 from typing import Any, ClassVar, Literal
 
@@ -125,6 +126,25 @@ class Executor(ABC):
         and cancels what has not started. With ``batched=True``, ``fn`` takes a list of items
         and returns the list of their results (vectorised work per chunk).
         """
+        chunks = self.imap_chunks(fn, items, chunksize=chunksize, batched=batched)
+        try:
+            for chunk in chunks:
+                yield from chunk
+        finally:
+            chunks.close()
+
+    def imap_chunks(
+        self,
+        fn: Callable[[Any], Any],
+        items: Iterable[Any],
+        *,
+        chunksize: int | None = None,
+        batched: bool = False,
+    ) -> Iterator[list[tuple[int, Any]]]:
+        """Like :meth:`imap_unordered`, but yield each finished chunk as one list of results.
+
+        Lets a caller act once per chunk (e.g. persist a checkpoint) rather than per item.
+        """
         handle = self._prepare(fn)
         numbered = enumerate(items)
         sizer = _ChunkSizer(chunksize, self.target_chunk_seconds)
@@ -151,7 +171,7 @@ class Executor(ABC):
                             f"{len(indices)} items"
                         )
                     sizer.record(len(indices), seconds)
-                    yield from zip(indices, results, strict=True)
+                    yield list(zip(indices, results, strict=True))
         finally:
             if pending:
                 self._cancel(list(pending))
@@ -339,3 +359,15 @@ def make_executor(
     if kind == "dask":
         return DaskExecutor(address=address, n_workers=n_workers)
     raise ValueError(f"unknown executor kind {kind!r}; choose one of {list(EXECUTOR_KINDS)}")
+
+
+@contextmanager
+def executor_scope(
+    executor: Executor | ExecutorKind, n_workers: int | None = None
+) -> Iterator[Executor]:
+    """Use ``executor`` if it is one (left open), else make one of that kind and close it after."""
+    if isinstance(executor, Executor):
+        yield executor
+        return
+    with make_executor(executor, n_workers=n_workers) as made:
+        yield made

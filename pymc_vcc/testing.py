@@ -4,12 +4,11 @@ Users and the test suite share these problems to check samplers against known an
 simulator is a picklable callable ``simulator(theta, rng)`` with ``parameter_names``,
 ``output_names`` and ``bounds`` (the uniform prior box the exact posteriors assume).
 
-Rejection ABC with a threshold ε on a distance that is a function of a sufficient statistic
-does not sample the exact posterior but the exact posterior convolved with the acceptance window.
-For a flat prior, a Gaussian posterior and a window that is a ball of radius ε in whitened
-(posterior-covariance) units, the ABC posterior is Gaussian-plus-uniform-ball with the same mean
-and its standard deviations inflated by :func:`abc_sd_inflation`; the problems below give the
-whitened distances that make this exact.
+Rejection ABC with a threshold ε does not sample the exact posterior p(θ | y) but the ABC target
+p(θ) P(d(y_sim, y) ≤ ε | θ). When the distance is a function of a sufficient statistic, that
+acceptance probability has a closed form, so each problem gives both the exact posterior and the
+exact ABC target for the realised ε (``abc_target``, bounds included): a sampler must match the
+target within Monte Carlo error, and the target's distance from the exact posterior is known.
 """
 
 from __future__ import annotations
@@ -18,6 +17,7 @@ import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import ClassVar
 
 import numpy as np
@@ -27,13 +27,27 @@ from scipy import stats
 from pymc_vcc.series import OutputData, Simulator
 
 
-def abc_sd_inflation(epsilon: float, dim: int) -> float:
-    """Ratio of ABC-posterior to exact-posterior standard deviation for a whitened ball window.
+def _grid_moments(axes: list[np.ndarray], log_weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance of a density given on a tensor grid (trapezoid rule)."""
+    weight = np.exp(log_weight - log_weight.max())
+    cell = np.ones_like(weight)
+    for axis, nodes in enumerate(axes):
+        spacing = np.gradient(nodes)
+        spacing[[0, -1]] /= 2  # trapezoid end weights
+        shape = [1] * len(axes)
+        shape[axis] = nodes.size
+        cell = cell * spacing.reshape(shape)
+    mass = weight * cell
+    mass /= mass.sum()
+    points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
+    flat = mass.ravel()
+    mean = flat @ points
+    centred = points - mean
+    return mean, (centred * flat[:, None]).T @ centred
 
-    A uniform ball of radius ε in ``dim`` dimensions has per-axis variance ε²/(dim + 2); added to
-    a unit-variance Gaussian it gives sqrt(1 + ε²/(dim + 2)).
-    """
-    return float(np.sqrt(1.0 + epsilon**2 / (dim + 2)))
+
+def _window(low: float, high: float, centre: float, half_width: float) -> np.ndarray:
+    return np.linspace(max(low, centre - half_width), min(high, centre + half_width), 4001)
 
 
 def _as_rows(observed: OutputData) -> np.ndarray:
@@ -84,21 +98,34 @@ class GaussianLocation:
         """|ȳ_sim − ȳ_obs| in units of sigma/sqrt(n_time) (batch form, (N, 1, m) → (N,))."""
         return np.abs(sims[:, 0, :].mean(axis=1) - obs[0].mean()) / self.standard_error
 
+    def abc_target(self, observed: OutputData, epsilon: float) -> tuple[float, float]:
+        """Mean and sd of the ABC target of :meth:`distance` ≤ ε (uniform prior on the bounds).
+
+        P(accept | mu) = Φ((ȳ − mu)/se + ε) − Φ((ȳ − mu)/se − ε), se = sigma/sqrt(n_time).
+        """
+        mean = float(_as_rows(observed)[0].mean())
+        scale = self.standard_error
+        grid = _window(self.low, self.high, mean, (12 + 2 * epsilon) * scale)
+        z = (mean - grid) / scale
+        accept = stats.norm.cdf(z + epsilon) - stats.norm.cdf(z - epsilon)
+        moments = _grid_moments([grid], np.log(np.maximum(accept, 1e-300)))
+        return float(moments[0][0]), float(np.sqrt(moments[1][0, 0]))
+
 
 @dataclass(frozen=True)
 class LinearGaussian:
-    """Straight line in noise: y_t = a + b·x_t + sigma·e_t on x_t = linspace(−1, 1, n_time).
+    """A drifting line in noise: y_t = a + b·t + sigma·e_t on t = linspace(0, 1, n_time).
 
     With a flat prior the exact posterior of (a, b) is N(β̂, sigma²(XᵀX)⁻¹), β̂ the least-squares
-    fit; :meth:`posterior_moments` ignores the prior bounds (exact when the posterior lies many
-    sds inside them). :meth:`distance` is the Mahalanobis distance between least-squares fits,
-    a function of the sufficient statistic.
+    fit, with strongly correlated a and b; :meth:`posterior_moments` ignores the prior bounds
+    (exact when the posterior lies many sds inside them). :meth:`distance` is the Mahalanobis
+    distance between least-squares fits, a function of the sufficient statistic.
     """
 
-    n_time: int = 50
+    n_time: int = 20
     sigma: float = 0.5
-    low: float = -3.0
-    high: float = 3.0
+    low: float = -1.5
+    high: float = 1.5
 
     parameter_names: ClassVar[tuple[str, ...]] = ("a", "b")
     output_names: ClassVar[tuple[str, ...]] = ("y",)
@@ -108,10 +135,10 @@ class LinearGaussian:
         """The uniform prior box."""
         return {"a": (self.low, self.high), "b": (self.low, self.high)}
 
-    @property
+    @cached_property
     def design(self) -> np.ndarray:
-        """Design matrix X (n_time, 2): a column of ones and x_t."""
-        x = np.linspace(-1.0, 1.0, self.n_time)
+        """Design matrix X (n_time, 2): a column of ones and t."""
+        x = np.linspace(0.0, 1.0, self.n_time)
         return np.column_stack([np.ones_like(x), x])
 
     def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> np.ndarray:
@@ -134,6 +161,29 @@ class LinearGaussian:
         whitening = np.linalg.cholesky(design.T @ design) / self.sigma
         difference = self._fit(sims[:, 0, :]) - self._fit(obs[0])
         return np.linalg.norm(difference @ whitening, axis=1)
+
+    def abc_target(self, observed: OutputData, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
+        """Mean (2,) and covariance (2, 2) of the ABC target of :meth:`distance` ≤ ε.
+
+        In whitened units the simulated fit is N(w(a, b), I), so P(accept | a, b) is the
+        non-central chi-square CDF at ε² with 2 degrees of freedom and non-centrality
+        |w(a, b) − w_obs|²; the uniform prior's bounds are included.
+        """
+        mean, covariance = self.posterior_moments(observed)
+        sd = np.sqrt(np.diag(covariance))
+        axes = [
+            np.linspace(
+                max(self.low, centre - (10 + 2 * epsilon) * s),
+                min(self.high, centre + (10 + 2 * epsilon) * s),
+                401,
+            )
+            for centre, s in zip(mean, sd, strict=True)
+        ]
+        a, b = np.meshgrid(*axes, indexing="ij")
+        offset = np.stack([a - mean[0], b - mean[1]], axis=-1)
+        noncentrality = np.einsum("...i,ij,...j->...", offset, np.linalg.inv(covariance), offset)
+        accept = stats.ncx2.cdf(epsilon**2, 2, noncentrality)
+        return _grid_moments(axes, np.log(np.maximum(accept, 1e-300)))
 
 
 @dataclass(frozen=True)
@@ -185,6 +235,17 @@ class ShiftedProfile:
         step = self.span / (self.n_time - 1)
         return step * np.floor(epsilon * self.n_time + 1e-9)
 
+    def abc_target(self, observed: OutputData, epsilon: float) -> tuple[float, float]:
+        """Mean and sd of the ABC target of KS ≤ ε: offsets within the window, bounds included."""
+        offset = float(_as_rows(observed)[0].mean())
+        window = self.ks_window(epsilon)
+        grid = _window(self.low, self.high, offset, window + 12 * self.sigma)
+        accept = stats.norm.cdf((offset + window - grid) / self.sigma) - stats.norm.cdf(
+            (offset - window - grid) / self.sigma
+        )
+        moments = _grid_moments([grid], np.log(np.maximum(accept, 1e-300)))
+        return float(moments[0][0]), float(np.sqrt(moments[1][0, 0]))
+
 
 @dataclass(frozen=True)
 class Flaky:
@@ -192,19 +253,23 @@ class Flaky:
 
     Failure modes, chosen evenly among ``modes`` by the same uniform draw: ``"raise"`` raises
     RuntimeError, ``"nan"`` and ``"inf"`` return outputs with a non-finite value, ``"status"``
-    returns a Dataset flagged ``attrs["status"] = "failed"`` as the VCC simulator does.
+    returns a Dataset flagged ``attrs["status"] = "failed"`` as the VCC simulator does, and
+    ``"stall"`` sleeps ``stall_seconds`` before answering (for time limits).
     """
 
     base: Simulator
     rate: float
     modes: tuple[str, ...] = ("raise", "nan", "inf", "status")
+    stall_seconds: float = 30.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.rate <= 1.0:
             raise ValueError(f"rate must be in [0, 1], got {self.rate}")
-        unknown = set(self.modes) - {"raise", "nan", "inf", "status"}
+        unknown = set(self.modes) - {"raise", "nan", "inf", "status", "stall"}
         if unknown or not self.modes:
-            raise ValueError(f"unknown failure modes {sorted(unknown)}; use raise/nan/inf/status")
+            raise ValueError(
+                f"unknown failure modes {sorted(unknown)}; use raise/nan/inf/status/stall"
+            )
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -222,6 +287,8 @@ class Flaky:
         mode = self.modes[min(int(draw / self.rate * len(self.modes)), len(self.modes) - 1)]
         if mode == "raise":
             raise RuntimeError("synthetic failure")
+        if mode == "stall":
+            return Slow(lambda theta, rng: outputs, self.stall_seconds, busy=False)(theta, rng)
         if mode == "status":
             dataset = as_dataset(outputs, self.output_names)
             dataset.attrs.update(status="failed", failure_reason="synthetic solver failure")

@@ -13,7 +13,6 @@ from pymc_vcc.testing import (
     GaussianLocation,
     LinearGaussian,
     ShiftedProfile,
-    abc_sd_inflation,
 )
 
 
@@ -68,14 +67,43 @@ def test_sufficient_distances_are_zero_for_equal_statistics_and_scale_in_sds():
     assert distance[1] == pytest.approx(expected, rel=1e-10)
 
 
-def test_abc_sd_inflation_matches_a_monte_carlo_ball_plus_gaussian():
-    rng = np.random.default_rng(3)
-    radius, dim = 1.3, 2
-    direction = rng.normal(size=(400_000, dim))
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    ball = direction * radius * rng.random((400_000, 1)) ** (1 / dim)
-    sample = ball + rng.normal(size=ball.shape)
-    assert sample[:, 0].std() == pytest.approx(abc_sd_inflation(radius, dim), rel=5e-3)
+def test_abc_targets_reduce_to_the_posterior_and_to_a_gaussian_plus_window():
+    # far from the bounds, a whitened ball of radius ε adds variance ε²/(d + 2) per axis
+    location = GaussianLocation(n_time=50, sigma=1.0, low=-3.0, high=3.0)
+    observed = location({"mu": 0.2}, np.random.default_rng(3))
+    posterior = location.posterior(observed)
+    mean, sd = location.abc_target(observed, 1e-3)
+    assert mean == pytest.approx(posterior.mean(), abs=1e-6)
+    assert sd == pytest.approx(posterior.std(), rel=1e-5)
+    mean, sd = location.abc_target(observed, 1.5)
+    assert mean == pytest.approx(posterior.mean(), abs=1e-6)
+    assert sd == pytest.approx(location.standard_error * np.sqrt(1 + 1.5**2 / 3), rel=1e-4)
+    line = LinearGaussian(n_time=20, sigma=1.0, low=-8.0, high=8.0)
+    observed = line({"a": 0.1, "b": -0.3}, np.random.default_rng(4))
+    exact_mean, exact_cov = line.posterior_moments(observed)
+    mean, covariance = line.abc_target(observed, 1e-2)
+    np.testing.assert_allclose(mean, exact_mean, atol=1e-4)
+    np.testing.assert_allclose(covariance, exact_cov, rtol=1e-3, atol=1e-6)
+    mean, covariance = line.abc_target(observed, 1.3)
+    np.testing.assert_allclose(covariance, exact_cov * (1 + 1.3**2 / 4), rtol=2e-3, atol=1e-6)
+    profile = ShiftedProfile()
+    observed = profile({"mu": 0.1}, np.random.default_rng(5))
+    window = profile.ks_window(0.05)
+    _, sd = profile.abc_target(observed, 0.05)
+    assert sd == pytest.approx(np.sqrt(profile.sigma**2 + window**2 / 3), rel=1e-4)
+
+
+def test_gaussian_location_abc_target_matches_brute_force_abc_near_a_bound():
+    location = GaussianLocation(n_time=25, sigma=1.0, low=-0.1, high=1.0)
+    observed = location({"mu": 0.0}, np.random.default_rng(6))
+    rng = np.random.default_rng(7)
+    mu = rng.uniform(location.low, location.high, 2_000_000)
+    sample_mean = mu + location.standard_error * rng.standard_normal(mu.size)
+    epsilon = 0.8
+    accepted = mu[np.abs(sample_mean - observed.mean()) <= epsilon * location.standard_error]
+    mean, sd = location.abc_target(observed, epsilon)
+    assert accepted.mean() == pytest.approx(mean, abs=4 * sd / np.sqrt(accepted.size))
+    assert accepted.std() == pytest.approx(sd, rel=4 / np.sqrt(2 * accepted.size))
 
 
 def test_ks_of_shifted_profiles_is_the_stated_step_function():
