@@ -1,0 +1,207 @@
+"""SMC-ABC with the parallel IMH kernel: exactness, reproducibility, failures, chains."""
+
+from __future__ import annotations
+
+import logging
+import warnings
+
+import numpy as np
+import pymc as pm
+import pytest
+from scipy import stats
+
+from pymc_vcc.executors import make_executor
+from pymc_vcc.pymc_model import add_simulator
+from pymc_vcc.smc import ParallelIMH, sample_smc_abc
+from pymc_vcc.testing import Flaky, GaussianLocation, LinearGaussian, ShiftedProfile
+
+QUIET = {"progressbar": False}
+
+
+@pytest.fixture(autouse=True)
+def _quiet_pymc(caplog):
+    caplog.set_level(logging.WARNING, logger="pymc")
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Numba will use object mode")
+        yield
+
+
+def shifted_profile_abc_moments(sim: ShiftedProfile, x_obs: float, epsilon: float):
+    """Exact mean and sd of the KS-Gaussian-kernel ABC posterior of ShiftedProfile (quadrature).
+
+    p(mu) ∝ ∫ N(x_obs + δ; mu, σ²) exp(−½ (KS(δ)/ε)²) dδ on the prior box, with
+    KS(δ) = min(n, floor(|δ|/h) + 1)/n the KS statistic of two profiles offset by δ.
+    """
+    step = sim.span / (sim.n_time - 1)
+    delta = np.arange(-1.0, 1.0, step / 16)
+    ks = np.minimum(sim.n_time, np.floor(np.abs(delta) / step) + 1) / sim.n_time
+    kernel = np.exp(-0.5 * (ks / epsilon) ** 2)
+    mu = np.linspace(sim.low, sim.high, 2001)
+    density = stats.norm.pdf(x_obs + delta[None, :], mu[:, None], sim.sigma) @ kernel
+    density /= density.sum()
+    mean = float(mu @ density)
+    return mean, float(np.sqrt(((mu - mean) ** 2) @ density))
+
+
+@pytest.fixture(scope="module")
+def deterministic_model():
+    """KS node on a simulator that ignores its random stream, plus an ordinary likelihood."""
+    sim = ShiftedProfile(sigma=0.0)
+    observed = sim({"mu": 0.2}, np.random.default_rng(0))
+    with pm.Model() as model:
+        add_simulator("y", sim, observed, epsilon=0.05)
+        pm.Normal("z", mu=model["mu"], sigma=0.5, observed=[0.1, 0.3])
+    return model
+
+
+def test_same_seed_gives_the_stock_kernels_posterior(deterministic_model):
+    settings = {"draws": 150, "chains": 1, "random_seed": 11, **QUIET}
+    with deterministic_model:
+        stock = pm.sample_smc(**settings, compute_convergence_checks=False)
+        ours = pm.sample_smc(kernel=ParallelIMH, **settings, compute_convergence_checks=False)
+    np.testing.assert_array_equal(ours.posterior["mu"].values, stock.posterior["mu"].values)
+    np.testing.assert_array_equal(ours.sample_stats["beta"].values, stock.sample_stats["beta"])
+    simulations = ours.sample_stats["simulations"].values
+    assert simulations[0] >= 2 * 150  # the initial population plus at least one mutation step
+    assert ours.sample_stats.attrs["n_simulations"] == simulations.sum()
+    assert ours.sample_stats.attrs["n_failed_simulations"] == 0
+    assert (ours.sample_stats["failed_simulations"].values == 0).all()
+
+
+def test_results_do_not_depend_on_the_executor():
+    sim = GaussianLocation(n_time=40)
+    observed = sim({"mu": 0.3}, np.random.default_rng(4))
+    with pm.Model():
+        add_simulator("y", sim, observed, epsilon=0.5, distance=sim.distance)
+        serial = sample_smc_abc(draws=100, executor="serial", random_seed=5, **QUIET)
+        with make_executor("processes", n_workers=2) as executor:
+            parallel = sample_smc_abc(draws=100, executor=executor, random_seed=5, **QUIET)
+    np.testing.assert_array_equal(serial.posterior["mu"].values, parallel.posterior["mu"].values)
+    assert "ProcessExecutor" in parallel.sample_stats.attrs["executor"]
+
+
+def test_gaussian_location_matches_the_exact_abc_posterior():
+    # Gaussian kernel on the whitened sufficient statistic: the ABC posterior is exactly
+    # N(ȳ, se²(1 + ε²)) truncated to the prior box.
+    sim = GaussianLocation()
+    observed = sim({"mu": 0.5}, np.random.default_rng(1))
+    epsilon = 0.5
+    exact = sim.posterior(observed)
+    mean, sd = exact.mean(), exact.std() * np.sqrt(1 + epsilon**2)
+    with pm.Model():
+        add_simulator("y", sim, observed, epsilon=epsilon, distance=sim.distance)
+        idata = sample_smc_abc(draws=400, executor="serial", random_seed=0, **QUIET)
+    draws = idata.posterior["mu"].values.ravel()
+    assert abs(draws.mean() - mean) < 0.3 * sd
+    assert 0.85 < draws.std() / sd < 1.15
+
+
+def test_linear_gaussian_matches_the_exact_abc_posterior():
+    sim = LinearGaussian()
+    observed = sim({"a": 0.2, "b": 0.1}, np.random.default_rng(2))  # far inside the box
+    epsilon = 0.5
+    mean, covariance = sim.posterior_moments(observed)
+    sd = np.sqrt(np.diag(covariance) * (1 + epsilon**2))
+    with pm.Model():
+        add_simulator("y", sim, observed, epsilon=epsilon, distance=sim.distance)
+        idata = sample_smc_abc(draws=400, executor="serial", random_seed=2, **QUIET)
+    draws = np.column_stack([idata.posterior[name].values.ravel() for name in ("a", "b")])
+    assert (np.abs(draws.mean(axis=0) - mean) < 0.3 * sd).all()
+    assert ((draws.std(axis=0) / sd > 0.85) & (draws.std(axis=0) / sd < 1.15)).all()
+    correlation = covariance[0, 1] / np.sqrt(covariance[0, 0] * covariance[1, 1])
+    assert abs(np.corrcoef(draws.T)[0, 1] - correlation) < 0.1
+
+
+@pytest.mark.parametrize("epsilon", [0.05, 0.1])
+def test_ks_kernel_matches_the_exact_abc_posterior(epsilon):
+    sim = ShiftedProfile()
+    observed = sim({"mu": 0.2}, np.random.default_rng(0))
+    mean, sd = shifted_profile_abc_moments(sim, float(observed.mean()), epsilon)
+    with pm.Model():
+        add_simulator("y", sim, observed, epsilon=epsilon)
+        idata = sample_smc_abc(draws=400, executor="serial", random_seed=1, **QUIET)
+    draws = idata.posterior["mu"].values.ravel()
+    assert abs(draws.mean() - mean) < 0.3 * sd
+    assert 0.85 < draws.std() / sd < 1.15
+
+
+def test_failed_simulations_are_zero_likelihood_and_counted():
+    base = GaussianLocation(n_time=50)
+    observed = base({"mu": 0.5}, np.random.default_rng(3))
+    sim = Flaky(base, rate=0.2)
+    epsilon = 0.5
+    exact = base.posterior(observed)
+    with pm.Model():
+        add_simulator(
+            "y", sim, observed, prior=base.bounds, epsilon=epsilon, distance=base.distance
+        )
+        idata = sample_smc_abc(draws=300, executor="serial", random_seed=4, **QUIET)
+    stats_ = idata.sample_stats
+    failed = stats_["failed_simulations"].values.sum()
+    total = stats_["simulations"].values.sum()
+    assert failed == stats_.attrs["n_failed_simulations"]
+    assert 0.15 < failed / total < 0.25  # the wrapper's failure rate
+    for kind in ("exception", "non-finite", "reported"):
+        assert kind in stats_.attrs["failure_kinds"]
+    draws = idata.posterior["mu"].values.ravel()
+    sd = exact.std() * np.sqrt(1 + epsilon**2)
+    assert abs(draws.mean() - exact.mean()) < 0.3 * sd
+    assert np.isfinite(draws).all()
+
+
+def test_a_simulator_that_always_fails_raises_a_clear_error():
+    base = GaussianLocation(n_time=20)
+    observed = base({"mu": 0.0}, np.random.default_rng(0))
+    with pm.Model():
+        failing = Flaky(base, rate=1.0, modes=("raise",))
+        add_simulator("y", failing, observed, prior=base.bounds, epsilon=0.5)
+        with pytest.raises(RuntimeError, match="all 20 simulations of the initial population"):
+            sample_smc_abc(draws=20, executor="serial", random_seed=0, **QUIET)
+
+
+def test_parallel_chains_fall_back_to_serial_simulation_inside_them():
+    sim = GaussianLocation(n_time=30)
+    observed = sim({"mu": 0.0}, np.random.default_rng(0))
+    with pm.Model():
+        add_simulator("y", sim, observed, epsilon=0.5, distance=sim.distance)
+        with (
+            make_executor("processes", n_workers=2) as executor,
+            pytest.warns(RuntimeWarning, match="cannot use the executor"),
+        ):
+            idata = pm.sample_smc(
+                draws=60,
+                kernel=ParallelIMH,
+                executor=executor,
+                chains=2,
+                cores=2,
+                random_seed=3,
+                compute_convergence_checks=False,
+                **QUIET,
+            )
+    assert idata.posterior["mu"].shape == (2, 60)
+
+
+def test_chains_run_one_after_another_with_the_executor():
+    sim = GaussianLocation(n_time=30)
+    observed = sim({"mu": 0.0}, np.random.default_rng(0))
+    with pm.Model():
+        add_simulator("y", sim, observed, epsilon=0.5, distance=sim.distance)
+        idata = sample_smc_abc(draws=60, chains=2, executor="serial", random_seed=3, **QUIET)
+    posterior = idata.posterior["mu"].values
+    assert posterior.shape == (2, 60)
+    assert not np.array_equal(posterior[0], posterior[1])
+
+
+def test_kernel_needs_a_simulator_node_and_a_real_executor():
+    with pm.Model():
+        mu = pm.Normal("mu")
+        pm.Normal("y", mu, 1.0, observed=[0.0, 1.0])
+        with pytest.raises(ValueError, match=r"no pm\.Simulator node"):
+            pm.sample_smc(draws=10, kernel=ParallelIMH, chains=1, **QUIET)
+    sim = GaussianLocation(n_time=10)
+    with pm.Model():
+        add_simulator("y", sim, sim({"mu": 0.0}, np.random.default_rng(0)), epsilon=0.5)
+        with pytest.raises(TypeError, match="executor must be"):
+            pm.sample_smc(draws=10, kernel=ParallelIMH, executor="processes", chains=1, **QUIET)
+        with pytest.raises(ValueError, match="chains must be a positive integer"):
+            sample_smc_abc(draws=10, chains=0)
