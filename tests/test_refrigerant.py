@@ -175,6 +175,9 @@ def test_round_trips(fluids, name):
     single = (props.quality < 0.0) | (props.quality > 1.0)
     np.testing.assert_allclose(fluid.h_pT(p[single], props.T[single]), h[single], atol=1e-5)
     np.testing.assert_allclose(fluid.p_sat(fluid.saturation(p).T_sat), p, rtol=1e-10)
+    # the bounding isotherms themselves are inside
+    np.testing.assert_allclose(fluid.h_pT(p, fluid.T_min), fluid.h_min(p), rtol=1e-9)
+    np.testing.assert_allclose(fluid.h_pT(p, fluid.T_max), fluid.h_max(p), rtol=1e-9)
 
 
 @pytest.mark.parametrize("name", FLUIDS)

@@ -126,11 +126,11 @@ def _bicubic(
 @njit(cache=True)
 def _region(
     tables: PropertyTables, p: float, h: float, i: int, width: float, t: float, liquid: bool
-) -> tuple[np.ndarray, np.ndarray, int, int, float, float, float, float, float, float]:
+) -> tuple[np.ndarray, int, int, float, float, float, float, float, float]:
     """Locate (p, h) in the liquid or vapour table.
 
-    Returns the table, its xi nodes, cell indices, cell sizes, local coordinates, the width w of
-    the region at p and the derivative d xi/dp at constant h.
+    Returns the table, cell indices, cell sizes, local coordinates, the width w of the region
+    at p and the derivative d xi/dp at constant h.
     """
     if liquid:
         a, a_p = _sat_curve(tables, H_MIN, i, width, t)
@@ -151,7 +151,7 @@ def _region(
     dxi = xi_nodes[jx + 1] - xi_nodes[jx]
     tp = (p - tables.table_p[ip]) / dp
     rx = (xi - xi_nodes[jx]) / dxi
-    return table, xi_nodes, ip, jx, dp, dxi, tp, rx, w, xi_p
+    return table, ip, jx, dp, dxi, tp, rx, w, xi_p
 
 
 @njit(cache=True)
@@ -177,7 +177,7 @@ def state(tables: PropertyTables, p: float, h: float) -> tuple[float, float, flo
     h_v, h_v_p = _sat_curve(tables, H_VAP, i, width, t)
     x = (h - h_l) / (h_v - h_l)
     if h < h_l or h > h_v:
-        table, _, ip, jx, dp, dxi, tp, rx, w, xi_p = _region(tables, p, h, i, width, t, h < h_l)
+        table, ip, jx, dp, dxi, tp, rx, w, xi_p = _region(tables, p, h, i, width, t, h < h_l)
         T, _, _ = _bicubic(table, PROP_T, ip, jx, dp, dxi, tp, rx)
         rho, rho_p, rho_xi = _bicubic(table, PROP_RHO, ip, jx, dp, dxi, tp, rx)
         return T, rho, rho_p + rho_xi * xi_p, rho_xi / w, x
@@ -241,7 +241,7 @@ def entropy(tables: PropertyTables, p: float, h: float) -> float:
     h_l, _ = _sat_curve(tables, H_LIQ, i, width, t)
     h_v, _ = _sat_curve(tables, H_VAP, i, width, t)
     if h < h_l or h > h_v:
-        table, _, ip, jx, dp, dxi, tp, rx, _, _ = _region(tables, p, h, i, width, t, h < h_l)
+        table, ip, jx, dp, dxi, tp, rx, _, _ = _region(tables, p, h, i, width, t, h < h_l)
         s, _, _ = _bicubic(table, PROP_S, ip, jx, dp, dxi, tp, rx)
         return s
     s_l, _ = _sat_curve(tables, S_LIQ, i, width, t)
@@ -254,7 +254,7 @@ def _invert_region(tables: PropertyTables, p: float, k: int, target: float, liqu
     """The xi in [0, 1] of the liquid or vapour table where property k equals target at p.
 
     Property k must increase with xi (T and s do); NaN when target lies outside its values at
-    xi = 0 and xi = 1. Newton steps, bisection when a step leaves the bracket.
+    xi = 0 and xi = 1 (beyond round-off). Newton steps, bisection when a step leaves the bracket.
     """
     table = tables.liquid if liquid else tables.vapour
     xi_nodes = tables.liquid_xi if liquid else tables.vapour_xi
@@ -264,8 +264,13 @@ def _invert_region(tables: PropertyTables, p: float, k: int, target: float, liqu
     last = xi_nodes.size - 2
     f_lo, _, _ = _bicubic(table, k, ip, 0, dp, xi_nodes[1] - xi_nodes[0], tp, 0.0)
     f_hi, _, _ = _bicubic(table, k, ip, last, dp, xi_nodes[last + 1] - xi_nodes[last], tp, 1.0)
-    if not (target >= f_lo and target <= f_hi):
+    slack = 1e-8 * (abs(f_lo) + abs(f_hi))  # T at xi = 0, 1 is T_min, T_max to ~1e-7 K
+    if not (target >= f_lo - slack and target <= f_hi + slack):
         return NAN
+    if target <= f_lo:
+        return 0.0
+    if target >= f_hi:
+        return 1.0
     lo = 0.0
     hi = 1.0
     xi = (target - f_lo) / (f_hi - f_lo)
@@ -320,7 +325,8 @@ def _h_from_property(tables: PropertyTables, p: float, k: int, target: float) ->
 def h_from_pT(tables: PropertyTables, p: float, T: float) -> float:
     """Enthalpy at (p, T), J/kg: liquid below the bubble point, vapour from the dew point up.
 
-    For a pure fluid T = T_sat gives the saturated vapour. NaN outside [T_min, T_max] or the
+    For a pure fluid T = T_sat gives the saturated vapour; within CoolProp's ~0.1 K R410A glide
+    it gives the two-phase state at that temperature. NaN outside [T_min, T_max] or the
     pressure range.
     """
     return _h_from_property(tables, p, PROP_T, T)
