@@ -1,0 +1,130 @@
+"""The paper's figures from results: inputs (Fig. 4), prior vs posterior KDEs (Figs. 5, 7),
+posterior predictive bands (Figs. 6, 8) and Sobol heatmaps (Figs. 9, 10).
+
+Each function returns a matplotlib Figure; :func:`save_figure` writes it as PNG and SVG.
+Temperatures are shown in °C, pressures in bar and mass flows in g/s, as engineers read them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
+from matplotlib.figure import Figure
+from scipy.stats import gaussian_kde
+
+_DISPLAY_UNITS = {
+    "K": ("°C", lambda v: v - 273.15),
+    "Pa": ("bar", lambda v: v / 1e5),
+    "kg/s": ("g/s", lambda v: v * 1e3),
+}
+
+
+def display(values: np.ndarray, units: str) -> tuple[np.ndarray, str]:
+    """Values converted from SI to the units engineers read (°C, bar, g/s), and those units."""
+    label, convert = _DISPLAY_UNITS.get(units, (units, lambda v: v))
+    return convert(np.asarray(values, dtype=float)), label
+
+
+def save_figure(figure: Figure, path_stem: str | Path) -> list[Path]:
+    """Write ``figure`` as ``<stem>.png`` and ``<stem>.svg``; returns the paths."""
+    stem = Path(path_stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    paths = [stem.with_suffix(".png"), stem.with_suffix(".svg")]
+    for path in paths:
+        figure.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(figure)
+    return paths
+
+
+def _grid(n_panels: int, n_columns: int, panel_size: tuple[float, float]):
+    n_columns = min(n_columns, n_panels)
+    n_rows = int(np.ceil(n_panels / n_columns))
+    figure, axes = plt.subplots(
+        n_rows,
+        n_columns,
+        figsize=(panel_size[0] * n_columns, panel_size[1] * n_rows),
+        squeeze=False,
+    )
+    for ax in axes.flat[n_panels:]:
+        ax.set_visible(False)
+    return figure, axes.flat
+
+
+def plot_inputs(inputs: xr.Dataset, *, calibration_end: float | None = None) -> Figure:
+    """Fig. 4: each input over time, one panel each; the calibration window's end dashed."""
+    names = list(inputs.data_vars)
+    figure, axes = _grid(len(names), 2, (5.0, 2.4))
+    time = inputs["time"].values
+    for ax, name in zip(axes, names, strict=False):
+        values, units = display(inputs[name].values, inputs[name].attrs.get("units", ""))
+        ax.step(time, values, where="post", color="tab:blue")
+        ax.set_title(inputs[name].attrs.get("long_name", name), fontsize=9)
+        ax.set_ylabel(units)
+        ax.set_xlabel("time (s)")
+        if calibration_end is not None:
+            ax.axvline(calibration_end, color="grey", linestyle="--", linewidth=1)
+    figure.tight_layout()
+    return figure
+
+
+def _kde_line(ax, samples: np.ndarray, low: float, high: float, **style) -> None:
+    samples = samples[np.isfinite(samples)]
+    if samples.size < 2 or np.ptp(samples) == 0:
+        if samples.size:
+            ax.axvline(samples[0], **style)
+        return
+    grid = np.linspace(low, high, 200)
+    ax.plot(grid, gaussian_kde(samples)(grid), **style)
+
+
+def plot_prior_posterior(
+    tree: xr.DataTree,
+    parameters: Sequence[str] | None = None,
+    *,
+    truth: Mapping[str, float] | None = None,
+    long_names: Mapping[str, str] | None = None,
+    n_columns: int = 4,
+) -> Figure:
+    """Figs. 5 and 7: KDEs of prior and posterior draws per parameter, true values marked."""
+    prior = tree["prior"].to_dataset()
+    posterior = tree["posterior"].to_dataset()
+    names = list(parameters) if parameters is not None else list(posterior.data_vars)
+    missing = [name for name in names if name not in posterior.data_vars]
+    if missing:
+        raise ValueError(f"parameters {missing} are not in the posterior {list(posterior)}")
+    figure, axes = _grid(len(names), n_columns, (3.2, 2.4))
+    for ax, name in zip(axes, names, strict=False):
+        prior_draws = prior[name].values.ravel()
+        posterior_draws = posterior[name].values.ravel()
+        both = np.concatenate([prior_draws, posterior_draws])
+        low, high = float(np.nanmin(both)), float(np.nanmax(both))
+        _kde_line(ax, prior_draws, low, high, color="tab:grey", label="prior")
+        _kde_line(ax, posterior_draws, low, high, color="tab:blue", label="posterior")
+        if truth is not None and name in truth:
+            ax.axvline(truth[name], color="tab:red", linestyle="--", label="true")
+        ax.set_title((long_names or {}).get(name, name), fontsize=8)
+        ax.set_yticks([])
+    axes[0].legend(fontsize=7)
+    figure.tight_layout()
+    return figure
+
+
+def plot_sobol_heatmap(indices: xr.Dataset, order: str = "S1") -> Figure:
+    """Figs. 9 and 10: Sobol indices of ``order`` ("S1" or "ST") as parameters × outputs."""
+    if order not in ("S1", "ST"):
+        raise ValueError(f"order must be 'S1' or 'ST', got {order!r}")
+    values = indices[order].transpose("parameter", "output").values
+    parameters = [str(p) for p in indices["parameter"].values]
+    outputs = [str(o) for o in indices["output"].values]
+    figure, ax = plt.subplots(figsize=(1.0 + 0.7 * len(outputs), 1.0 + 0.3 * len(parameters)))
+    image = ax.imshow(np.clip(values, 0.0, 1.0), cmap="viridis", vmin=0.0, vmax=1.0, aspect="auto")
+    ax.set_xticks(range(len(outputs)), outputs)
+    ax.set_yticks(range(len(parameters)), parameters, fontsize=7)
+    ax.set_title("first-order Sobol indices" if order == "S1" else "total-order Sobol indices")
+    figure.colorbar(image, ax=ax, fraction=0.05)
+    figure.tight_layout()
+    return figure

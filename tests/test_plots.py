@@ -1,0 +1,58 @@
+"""The paper's figures render from results and are written as PNG and SVG."""
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from pymc_vcc.plots import (
+    display,
+    plot_inputs,
+    plot_prior_posterior,
+    plot_sobol_heatmap,
+    save_figure,
+)
+
+
+def _tree(rng):
+    def group(scale):
+        return xr.Dataset(
+            {
+                "M0": (("chain", "draw"), rng.normal(1.5, scale, (1, 300))),
+                "cf_lev": (("chain", "draw"), rng.normal(1.0, scale, (1, 300))),
+            }
+        )
+
+    return xr.DataTree.from_dict({"prior": group(0.3), "posterior": group(0.05)})
+
+
+def test_display_units():
+    values, units = display(np.array([273.15, 300.15]), "K")
+    np.testing.assert_allclose(values, [0.0, 27.0])
+    assert units == "°C"
+    assert display(np.array([2e5]), "Pa")[0][0] == pytest.approx(2.0)
+    assert display(np.array([0.02]), "kg/s") == (pytest.approx(20.0), "g/s")
+
+
+def test_figures_are_written(tmp_path):
+    rng = np.random.default_rng(0)
+    figure = plot_prior_posterior(_tree(rng), truth={"M0": 1.5})
+    paths = save_figure(figure, tmp_path / "kde")
+    assert [p.suffix for p in paths] == [".png", ".svg"]
+    assert all(p.stat().st_size > 1000 for p in paths)
+
+    inputs = xr.Dataset(
+        {"T_ambient": ("time", [308.15, 303.15], {"units": "K"})}, coords={"time": [0.0, 100.0]}
+    )
+    save_figure(plot_inputs(inputs, calibration_end=50.0), tmp_path / "inputs")
+
+    indices = xr.Dataset(
+        {"S1": (("parameter", "output"), rng.random((3, 2)))},
+        coords={"parameter": ["a", "b", "c"], "output": ["TD", "PD"]},
+    )
+    save_figure(plot_sobol_heatmap(indices, "S1"), tmp_path / "sobol")
+    assert (tmp_path / "sobol.png").exists()
+
+
+def test_unknown_parameter_is_a_clear_error():
+    with pytest.raises(ValueError, match="not in the posterior"):
+        plot_prior_posterior(_tree(np.random.default_rng(1)), ["nope"])
