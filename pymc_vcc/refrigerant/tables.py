@@ -1,4 +1,6 @@
-"""The array layout of the refrigerant property tables, shared by the builder and the kernels.
+"""What the refrigerant property tables cover and how they are laid out in arrays.
+
+Shared by the builder, the cache and the kernels.
 
 The (p, h) plane below the critical point is split by the saturation dome:
 
@@ -86,7 +88,7 @@ class TableResolution:
     """
 
     n_sat: int = 300
-    n_p: int = 100
-    n_liquid: int = 40
-    n_vapour: int = 50
+    n_p: int = 150
+    n_liquid: int = 30
+    n_vapour: int = 40
     xi_grading: float = 1.6
