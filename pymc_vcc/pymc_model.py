@@ -30,18 +30,11 @@ from pytensor.graph.op import Op
 from pytensor.tensor.variable import TensorVariable
 from scipy.special import expit
 
+from pymc_vcc.abc import NOISE_PREFIX, noise_parameter, with_noise
 from pymc_vcc.distances import BatchDistance, ks_distances
 from pymc_vcc.outcomes import SimulationOutcome, run_simulation
-from pymc_vcc.priors import Bounds, GMMPrior, Prior, UniformPrior, validate_bounds
+from pymc_vcc.priors import Bounds, GMMPrior, Prior, UniformPrior
 from pymc_vcc.series import ObservedData, OutputData, Simulator, prepare_observed
-
-NOISE_PREFIX = "nu_"
-"""Name of the noise scale of output ``TD`` is ``nu_TD`` (dimensionless, relative to |Y|)."""
-
-
-def noise_name(output: str) -> str:
-    """Name of the noise-scale parameter of ``output``."""
-    return f"{NOISE_PREFIX}{output}"
 
 
 def add_output_noise(
@@ -280,15 +273,6 @@ def simulator_bounds(
     return {name: available[name] for name in parameters}
 
 
-def _noise_bounds(noise, outputs: Sequence[str]) -> dict[str, tuple[float, float]]:
-    if isinstance(noise, Mapping):
-        unknown = [name for name in noise if name not in outputs]
-        if unknown:
-            raise ValueError(f"noise given for unknown output(s) {unknown}; outputs: {outputs}")
-        return validate_bounds({noise_name(out): bounds for out, bounds in noise.items()})
-    return validate_bounds({noise_name(out): noise for out in outputs})
-
-
 @dataclass(frozen=True)
 class SimulatorNode:
     """What :func:`add_simulator` added to the model.
@@ -354,15 +338,11 @@ def add_simulator(
         prior = UniformPrior(simulator_bounds(simulator, parameters))
     elif not isinstance(prior, Prior):
         prior = UniformPrior(prior)
-    if noise is not None:
-        if not isinstance(prior, UniformPrior):
-            raise ValueError(
-                "noise= adds uniform noise priors to a uniform prior; a GMMPrior must already "
-                "hold the noise scales (fit it on samples that include the nu_<output> columns)"
-            )
-        prior = prior.extended(_noise_bounds(noise, data.names))
+    if noise is not None and not isinstance(noise, Mapping):
+        noise = dict.fromkeys(data.names, noise)
+    prior = with_noise(prior, noise, data.names)
 
-    noise_outputs = tuple(out for out in data.names if noise_name(out) in prior.names)
+    noise_outputs = tuple(out for out in data.names if noise_parameter(out) in prior.names)
     stray_noise = [
         n
         for n in prior.names
@@ -393,7 +373,7 @@ def add_simulator(
     )
     params = [pt.stack([variables[n] for n in model_parameters])]
     if noise_outputs:
-        params.append(pt.stack([variables[noise_name(out)] for out in noise_outputs]))
+        params.append(pt.stack([variables[noise_parameter(out)] for out in noise_outputs]))
 
     time = data.dataset["time"].values if "time" in data.dataset.coords else None
     model.add_coord(f"{name}_output", list(data.names))
@@ -413,7 +393,6 @@ def add_simulator(
 
 
 __all__ = [
-    "NOISE_PREFIX",
     "DistanceKernel",
     "SimulatorFunction",
     "SimulatorNode",
@@ -421,7 +400,6 @@ __all__ = [
     "add_simulator",
     "gaussian_log_kernel",
     "gmm_prior_variable",
-    "noise_name",
     "prior_variables",
     "simulator_bounds",
 ]

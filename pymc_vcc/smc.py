@@ -37,7 +37,6 @@ import time
 import warnings
 from collections import Counter
 from collections.abc import Callable, Sequence
-from contextlib import contextmanager
 from functools import partial
 from typing import Any, ClassVar
 
@@ -53,7 +52,7 @@ from pymc.smc.kernels import IMH, Pearson
 from pytensor.tensor.type_other import NoneTypeT
 from xarray import DataTree
 
-from pymc_vcc.executors import Executor, ExecutorKind, SerialExecutor, make_executor
+from pymc_vcc.executors import Executor, ExecutorKind, SerialExecutor, executor_scope
 from pymc_vcc.outcomes import OK, SimulationOutcome
 from pymc_vcc.pymc_model import SimulatorFunction
 
@@ -333,21 +332,11 @@ class ParallelIMH(IMH):
         }
 
 
-@contextmanager
-def _executor_context(executor: Executor | ExecutorKind | None, n_workers, address):
-    if executor is None or isinstance(executor, Executor):
-        yield executor
-        return
-    with make_executor(executor, n_workers=n_workers, address=address) as opened:
-        yield opened
-
-
 def sample_smc_abc(
     draws: int = 1000,
     *,
-    executor: Executor | ExecutorKind | None = "processes",
+    executor: Executor | ExecutorKind = "processes",
     n_workers: int | None = None,
-    address: Any = None,
     chains: int = 1,
     random_seed: Any = None,
     model: Model | None = None,
@@ -360,9 +349,9 @@ def sample_smc_abc(
 
     Args:
         draws: particles per stage (and posterior draws per chain).
-        executor: an open executor, or a kind (``"serial"``, ``"processes"``, ``"dask"``) to
-            open for this call; None: in this process.
-        n_workers, address: passed to :func:`pymc_vcc.executors.make_executor` for a kind.
+        executor: an open executor (left open), or a kind (``"serial"``, ``"processes"``,
+            ``"dask"`` for a new local cluster) opened for this call and closed after.
+        n_workers: workers of an executor opened here (default: every core).
         chains: independent SMC runs, one after another, each using the whole executor
             (default 1: see the module docstring for why).
         random_seed: seeds everything (proposals, resampling and every simulation).
@@ -380,7 +369,7 @@ def sample_smc_abc(
     if int(draws) != draws or draws < 2:
         raise ValueError(f"draws must be an integer >= 2, got {draws}")
     kwargs.setdefault("compute_convergence_checks", chains > 1)
-    with _executor_context(executor, n_workers, address) as opened:
+    with executor_scope(executor, n_workers) as opened:
         return pm.sample_smc(
             draws=int(draws),
             kernel=ParallelIMH,
