@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -65,14 +66,24 @@ class Saturation(NamedTuple):
 
 
 def _flat(*values: ArrayLike) -> tuple[tuple[int, ...], list[NDArray[np.float64]]]:
-    """Broadcast ``values`` and return their shape and contiguous 1-D float64 copies."""
+    """Broadcast ``values`` and return their shape and contiguous 1-D float64 arrays."""
+    first = values[0]
+    if all(
+        isinstance(v, np.ndarray)
+        and v.dtype == np.float64
+        and v.ndim == 1
+        and v.shape == first.shape
+        and v.flags.c_contiguous
+        for v in values
+    ):
+        return first.shape, list(values)
     arrays = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in values))
     return arrays[0].shape, [np.ascontiguousarray(a).ravel() for a in arrays]
 
 
 def _shaped(values: NDArray[np.float64], shape: tuple[int, ...]) -> NDArray[np.float64]:
-    """``values`` reshaped to ``shape`` (a NumPy scalar when the shape is ())."""
-    return values.reshape(shape)[()]
+    """``values`` (n,) or rows (k, n) reshaped to ``shape`` or (k, *shape); scalars for ()."""
+    return values.reshape(values.shape[:-1] + shape)[()]
 
 
 def _require(ok: NDArray[np.bool_], message: Callable[[int], str]) -> None:
@@ -169,16 +180,15 @@ class Refrigerant:
         """T, rho, drho_dp, drho_dh, quality and s at pressure p (Pa) and enthalpy h (J/kg)."""
         shape, (p_flat, h_flat) = _flat(p, h)
         rows = kernels.props_array(self.tables, p_flat, h_flat)
-        if np.isnan(rows[0]).any():  # the kernels flag states outside the tables with NaN
+        if math.isnan(rows[0].sum()):  # the kernels flag states outside the tables with NaN
             self._check_enthalpy(p_flat, h_flat)
-        return Properties(*(_shaped(row, shape) for row in rows))
+        return Properties(*_shaped(rows, shape))
 
     def saturation(self, p: ArrayLike) -> Saturation:
         """T_sat, h_l, h_v, rho_l, rho_v at pressure p (Pa)."""
         shape, (p_flat,) = _flat(p)
         self._check_pressure(p_flat)
-        rows = kernels.saturation_array(self.tables, p_flat)
-        return Saturation(*(_shaped(row, shape) for row in rows))
+        return Saturation(*_shaped(kernels.saturation_array(self.tables, p_flat), shape))
 
     def p_sat(self, T: ArrayLike) -> NDArray[np.float64]:
         """Saturation pressure at temperature T (K), Pa: the inverse of ``saturation(p).T_sat``."""
