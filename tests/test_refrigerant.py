@@ -58,6 +58,11 @@ def heos_density(state_heos, p, h):
     return state_heos.rhomass()
 
 
+def heos_temperature(state_heos, p, h):
+    state_heos.update(CP.HmassP_INPUTS, h, p)
+    return state_heos.T()
+
+
 def test_supported_fluids_are_the_three_named():
     assert set(SUPPORTED_FLUIDS) == set(FLUIDS)
 
@@ -142,6 +147,28 @@ def test_density_derivatives_match_finite_differences_of_heos(fluids, name):
     got = fluid.props(p, h)
     assert np.max(np.abs(got.drho_dp / fd_p - 1.0)) < DERIVATIVE_TOLERANCE
     assert np.max(np.abs(got.drho_dh / fd_h - 1.0)) < DERIVATIVE_TOLERANCE
+
+
+@pytest.mark.parametrize("name", FLUIDS)
+def test_single_phase_right_next_to_the_dome_matches_heos(fluids, name):
+    """Subcooled and superheated states 10 J/kg and 1 kJ/kg from the saturation lines."""
+    fluid = fluids[name]
+    p = np.geomspace(fluid.p_min, fluid.p_max, 60)
+    sat = fluid.saturation(p)
+    ref = heos(name)
+    for offset in (10.0, 1000.0):
+        for h in (sat.h_l - offset, sat.h_v + offset):
+            got = fluid.props(p, h)
+            rho = np.array([heos_density(ref, a, b) for a, b in zip(p, h, strict=True)])
+            T = np.array([heos_temperature(ref, a, b) for a, b in zip(p, h, strict=True)])
+            assert np.max(np.abs(got.rho / rho - 1.0)) < RHO_TOLERANCE
+            assert np.max(np.abs(got.T - T)) < T_TOLERANCE
+            if offset > 100.0:  # the derivative stencil stays on one side of the line
+                fd_h = [
+                    (heos_density(ref, a, b + 20.0) - heos_density(ref, a, b - 20.0)) / 40.0
+                    for a, b in zip(p, h, strict=True)
+                ]
+                assert np.max(np.abs(got.drho_dh / fd_h - 1.0)) < DERIVATIVE_TOLERANCE
 
 
 @pytest.mark.parametrize("name", FLUIDS)
