@@ -111,6 +111,16 @@ class SimulatorFunction:
     noise_outputs: tuple[str, ...] = ()
     time_limit_s: float | None = None
 
+    def __post_init__(self) -> None:
+        if not self.parameter_names:
+            raise ValueError("parameter_names is empty; name at least one parameter")
+        unknown = [name for name in self.noise_outputs if name not in self.observed.names]
+        if unknown:
+            raise ValueError(
+                f"noise_outputs {unknown} are not among the observed outputs "
+                f"{list(self.observed.names)}"
+            )
+
     def outcome(self, rng: np.random.Generator, theta, noise=None) -> SimulationOutcome:
         """Run one simulation; failures are captured as in :func:`run_simulation`."""
         values = np.asarray(theta, dtype=float).reshape(-1, len(self.parameter_names))[0]
