@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 from scipy.special import expit, logit, logsumexp
-from sklearn.mixture import GaussianMixture
 
 Bounds = Mapping[str, tuple[float, float]]
 
@@ -249,6 +248,8 @@ class GMMPrior(Prior):
             max_components: largest number of components tried.
             seed: seeds scikit-learn's initialisation (same seed, same fit).
         """
+        from sklearn.mixture import GaussianMixture  # heavy import, needed only here
+
         checked = validate_bounds(bounds.bounds if isinstance(bounds, Prior) else bounds)
         names = list(checked)
         if int(max_components) != max_components or max_components < 1:

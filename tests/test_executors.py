@@ -14,7 +14,10 @@ import cloudpickle
 import numpy as np
 import pytest
 
+from pymc_vcc.abc import abc_rejection
 from pymc_vcc.executors import DaskExecutor, make_executor
+from pymc_vcc.priors import UniformPrior
+from pymc_vcc.testing import Flaky, GaussianLocation
 
 LOCAL_KINDS = ["serial", "processes"]
 
@@ -145,15 +148,17 @@ def dask_cli_cluster(directory: Path, n_workers: int = 2):
             )
         yield address
     finally:
-        for process in reversed(processes):
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(process.pid, signal.SIGTERM)
-        for process in reversed(processes):
-            try:
-                process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
-                process.wait()
+        # workers first (they would wait for a vanished scheduler), then the scheduler
+        for group in (processes[1:], processes[:1]):
+            for process in group:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(process.pid, signal.SIGTERM)
+            for process in group:
+                try:
+                    process.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    os.killpg(process.pid, signal.SIGKILL)
+                    process.wait()
         log.close()
 
 
@@ -173,3 +178,16 @@ def test_dask_cluster_started_from_the_command_line_gives_the_serial_results(tmp
         assert executor.map(_seeded_draw, range(300)) == [_seeded_draw(i) for i in range(300)]
         workers = executor.map(lambda _: os.getpid(), range(40), chunksize=1)
         assert os.getpid() not in workers
+        # a calibration through the cluster equals the serial one, failures and all
+        model = Flaky(GaussianLocation(n_time=30), rate=0.1)
+        observed = GaussianLocation(n_time=30)({"mu": 0.2}, np.random.default_rng(1))
+        settings = dict(n_pilot=300, quantile=0.1, n_main=2000, n_desired=80, seed=3)
+        prior = UniformPrior(model.base.bounds)
+        on_dask = abc_rejection(model, prior, observed, executor=executor, **settings)
+    serial = abc_rejection(model, prior, observed, executor="serial", **settings)
+    assert on_dask.posterior.sizes["draw"] == 80
+    for group, variable in [("posterior", "mu"), ("sample_stats", "sim_distance")]:
+        np.testing.assert_array_equal(on_dask[group][variable], serial[group][variable])
+    np.testing.assert_array_equal(
+        on_dask.sample_stats["sim_status"], serial.sample_stats["sim_status"]
+    )
