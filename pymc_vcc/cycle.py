@@ -25,7 +25,11 @@ import math
 import numpy as np
 from numba import njit
 
-from pymc_vcc.components.compressor import compressor, volumetric_efficiency
+from pymc_vcc.components.compressor import (
+    compressor,
+    protection_speed_factor,
+    volumetric_efficiency,
+)
 from pymc_vcc.components.density import cell_state
 from pymc_vcc.components.expansion_valve import valve_mass_flow
 from pymc_vcc.components.fan import air_capacity_rate, air_inlet_temperature, fan_operating_point
@@ -114,8 +118,11 @@ N_EVAL = len(OUTPUT_IDS) + len(DIAGNOSTIC_INFO)
     C_KP,
     C_KI,
     C_M0,
+    C_T_DIS_MAX,  # compressor thermal limit, K
+    C_P_PROT_START,  # high-pressure protection, Pa
+    C_P_PROT_STOP,
     N_CONSTANTS,
-) = range(45)
+) = range(48)
 
 # regularisation widths
 _FLOW_EPS = 1e-4  # kg/s, upwind weights and |ṁ| in pressure drops
@@ -204,6 +211,9 @@ def build_constants(unit: Unit, theta: np.ndarray, controller: bool | None = Non
     c[C_ETA_IS] = comp.isentropic_efficiency
     c[C_REF_FRACTION] = comp.refrigerant_power_fraction
     c[C_SHELL_UA] = comp.shell_ua
+    c[C_T_DIS_MAX] = comp.max_discharge_temperature
+    c[C_P_PROT_START] = comp.protection_pressure_start
+    c[C_P_PROT_STOP] = comp.protection_pressure_stop
     c[C_VALVE_AREA] = unit.expansion_valve.flow_area
     f = unit.pressure_drop.darcy_friction_factor
     c[C_K_LIQ] = friction_coefficient(f, p["L_LIQ"], unit.liquid_line.inner_diameter)
@@ -287,6 +297,7 @@ def evaluate(y, u, c, tables, dydt, out):
     h_suc = tank_outlet_enthalpy(h_ze[n + 1], h_vap_e, _TANK_WIDTH)
     rho_out = cell_state(tables, p_e, h_suc)[1]
     eta_guess = volumetric_efficiency(p_c / p_e, c[C_CLEARANCE], c[C_EXPONENT], c[C_CF_VOL])
+    speed = speed * protection_speed_factor(p_c, c[C_P_PROT_START], c[C_P_PROT_STOP])
     m_guess = eta_guess * rho_out * c[C_DISPLACEMENT] * speed
     dp_suction = pressure_drop(c[C_K_EVAP], m_guess, rho_mean_e, _FLOW_EPS) + pressure_drop(
         c[C_K_VAP], m_guess, rho_out, _FLOW_EPS
@@ -312,6 +323,7 @@ def evaluate(y, u, c, tables, dydt, out):
         c[C_CF_POW],
         c[C_CF_PREF],
         c[C_CF_SHELL],
+        c[C_T_DIS_MAX],
     )
     T_d = state(tables, p_d, h_d)[0]
     if not (math.isfinite(T_d) and math.isfinite(T_s)):

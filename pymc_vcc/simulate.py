@@ -201,7 +201,9 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
         def jac(t, state, u=u):
             stats["n_jac"] += 1
             evaluate(state, u, c, tables, dydt, out)
-            return jacobian(state, u, c, tables, dydt.copy())
+            matrix = jacobian(state, u, c, tables, dydt.copy())
+            # columns that left the property tables: let the step-size control back off
+            return np.nan_to_num(matrix, nan=0.0, posinf=0.0, neginf=0.0)
 
         in_segment = (times >= t0) & ((times < t1) | (last & (times <= t1)))
         pending = np.flatnonzero(in_segment)
@@ -222,7 +224,10 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
         except ValueError as error:
             return f"solver start at t = {t0:.1f} s: {error}"
         while solver.status == "running":
-            message = solver.step()
+            try:
+                message = solver.step()
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+                return f"solver failure at t = {solver.t:.2f} s: {error}"
             stats["n_steps"] += 1
             if solver.status == "failed":
                 why = message or "Radau failed"
@@ -248,7 +253,8 @@ class VCCSimulator:
     Parameters not in ``theta`` take their nominal values; the simulation is deterministic
     (``rng`` is accepted for the interface). Failed runs are returned flagged in attrs, never
     raised. ``outputs`` selects output ids; ``t_window = (t_start, t_end)`` simulates up to
-    ``t_end`` and returns the outputs from ``t_start`` on.
+    ``t_end`` and returns the outputs from ``t_start`` on. ``parameters`` names the ids a
+    sampler calibrates (default: all 26); the others stay at nominal, or at ``fixed`` values.
     """
 
     def __init__(
@@ -260,6 +266,8 @@ class VCCSimulator:
         *,
         controller: bool | None = None,
         max_wall_time: float | None = None,
+        parameters: Sequence[str] | None = None,
+        fixed: Mapping[str, float] | None = None,
     ) -> None:
         self.unit = load_unit() if unit is None else unit
         self.inputs = builtin_inputs() if inputs is None else inputs
@@ -269,7 +277,14 @@ class VCCSimulator:
         if unknown or not selected:
             raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(OUTPUT_IDS)}")
         self.output_names: tuple[str, ...] = selected
-        self.parameter_names: tuple[str, ...] = self.unit.parameters.ids
+        all_ids = self.unit.parameters.ids
+        self.parameter_names: tuple[str, ...] = all_ids if parameters is None else tuple(parameters)
+        self.fixed: dict[str, float] = dict(fixed or {})
+        for what, names in (("parameters", self.parameter_names), ("fixed", self.fixed)):
+            unknown = [name for name in names if name not in all_ids]
+            if unknown:
+                raise ValueError(f"unknown {what} id(s) {unknown}; allowed are {list(all_ids)}")
+        self.unit.parameters.vector(self.fixed, check_bounds=True)
         end = float(self.inputs["time"].values[-1])
         if t_window is None:
             t_window = (0.0, end)
@@ -286,7 +301,7 @@ class VCCSimulator:
         """Simulate with parameters ``theta`` (id -> value) and return the selected outputs."""
         result = simulate(
             self.unit,
-            dict(theta),
+            {**self.fixed, **theta},
             self.inputs,
             t_end=self.t_window[1],
             controller=self.controller,

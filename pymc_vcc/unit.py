@@ -59,6 +59,9 @@ class CompressorGeometry:
     isentropic_efficiency: float  # -
     refrigerant_power_fraction: float  # share of shaft power reaching the refrigerant, -
     shell_ua: float  # shell heat-loss conductance to ambient, W/K
+    max_discharge_temperature: float  # thermal limit of the discharge gas, K
+    protection_pressure_start: float  # discharge pressure where the speed droop starts, Pa
+    protection_pressure_stop: float  # discharge pressure of 5 % speed, Pa
 
 
 @dataclass(frozen=True)

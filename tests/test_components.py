@@ -8,6 +8,7 @@ import pytest
 from pymc_vcc.components.compressor import (
     compressor,
     compressor_mass_flow,
+    protection_speed_factor,
     shaft_power,
     volumetric_efficiency,
 )
@@ -90,18 +91,43 @@ def test_compressor_energy_balance(tables):
     common = (11.5e-6, 0.04, 1.1, 0.72, 0.92, 4.0)
     # no shell loss, all power to the refrigerant: h_d = h_s + Δh_s / η_s
     m, h_d, power, net = compressor(
-        tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, *common[:4], 1.0, common[5], 1.0, 1.0, 1.0, 0.0
+        tables,
+        p_s,
+        h_s,
+        rho_s,
+        p_d,
+        55.0,
+        308.15,
+        *common[:4],
+        1.0,
+        common[5],
+        1.0,
+        1.0,
+        1.0,
+        0.0,
+        430.0,
     )
     h_is = h_from_ps(tables, p_d, entropy(tables, p_s, h_s))
     assert h_d - h_s == pytest.approx((h_is - h_s) / 0.72, rel=1e-3)
-    assert net == pytest.approx(power, rel=1e-9)
+    assert net == pytest.approx(power, rel=1e-3)  # the smooth thermal cap costs < 0.1 %
     assert 0.015 < m < 0.025
     # shell loss removes heat: discharge enthalpy lower, balance closes
     m, h_d2, power2, net2 = compressor(
-        tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, *common, 1.0, 1.0, 1.0, 1.0
+        tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, *common, 1.0, 1.0, 1.0, 1.0, 430.0
     )
     assert h_d2 < h_d and net2 < 0.92 * power2
     assert m * (h_d2 - h_s) == pytest.approx(net2, rel=1e-9)
+    # the thermal limit caps the discharge temperature
+    m, h_d3, _, _ = compressor(
+        tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, *common, 1.0, 2.0, 1.5, 0.3, 340.0
+    )
+    assert state(tables, p_d, h_d3)[0] < 340.0 < state(tables, p_d, h_d)[0]
+
+
+def test_protection_speed_factor():
+    assert protection_speed_factor(30e5, 41e5, 46e5) == 1.0
+    assert protection_speed_factor(43.5e5, 41e5, 46e5) == pytest.approx(1 - 0.95 / 2)
+    assert protection_speed_factor(47e5, 41e5, 46e5) == pytest.approx(0.05)
 
 
 def test_refrigerant_htc_blend():

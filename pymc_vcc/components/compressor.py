@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from numba import njit
 
-from pymc_vcc.components.smooth import smooth_max, smooth_pos
-from pymc_vcc.refrigerant import entropy, h_from_ps, state
+from pymc_vcc.components.smooth import smooth_max, smooth_min, smooth_pos, smooth_step
+from pymc_vcc.refrigerant import entropy, h_from_ps, h_from_pT, state
 
 
 @njit(cache=True)
@@ -45,6 +45,13 @@ def shell_loss(ua: float, cf_shell: float, T_shell: float, T_ambient: float) -> 
 
 
 @njit(cache=True)
+def protection_speed_factor(pressure: float, p_start: float, p_stop: float) -> float:
+    """High-pressure protection of inverter units: the drive lowers the speed smoothly from
+    100 % at ``p_start`` to 5 % at ``p_stop`` (Pa) of high-side pressure."""
+    return 1.0 - 0.95 * smooth_step((pressure - p_start) / (p_stop - p_start))
+
+
+@njit(cache=True)
 def compressor(
     tables,
     p_suction: float,
@@ -63,12 +70,15 @@ def compressor(
     cf_pow: float,
     cf_pref: float,
     cf_shell: float,
+    T_discharge_max: float,
 ) -> tuple[float, float, float, float]:
     """(ṁ kg/s, discharge enthalpy J/kg, shaft power W, net power to the refrigerant W).
 
     Power to the refrigerant is cf_pref · fraction · shaft power, less the shell loss evaluated
-    at the temperature the gas would reach without it. Non-finite (NaN) results mean a property
-    call left the tables.
+    at the temperature the gas would reach without it. The shell loss grows smoothly (over
+    2 kJ/kg) wherever the discharge would exceed ``T_discharge_max`` (K), the compressor's
+    thermal limit, so the discharge state stays inside the property tables. Non-finite (NaN)
+    results mean a property call left the tables.
     """
     eta_vol = volumetric_efficiency(p_discharge / p_suction, clearance, exponent, cf_vol)
     mass_flow = compressor_mass_flow(rho_suction, speed, displacement, eta_vol)
@@ -76,7 +86,9 @@ def compressor(
     h_isentropic = h_from_ps(tables, p_discharge, s_suction)
     power = shaft_power(mass_flow, h_isentropic - h_suction, isentropic_efficiency, cf_pow)
     to_refrigerant = cf_pref * refrigerant_fraction * power
-    h_adiabatic = h_suction + to_refrigerant / mass_flow
+    h_limit = h_from_pT(tables, p_discharge, T_discharge_max)
+    h_adiabatic = smooth_min(h_suction + to_refrigerant / mass_flow, h_limit, 2e3)
     T_adiabatic = state(tables, p_discharge, h_adiabatic)[0]
     net = to_refrigerant - shell_loss(shell_ua, cf_shell, T_adiabatic, T_ambient)
-    return mass_flow, h_suction + net / mass_flow, power, net
+    h_discharge = smooth_min(h_suction + net / mass_flow, h_limit, 2e3)
+    return mass_flow, h_discharge, power, mass_flow * (h_discharge - h_suction)
