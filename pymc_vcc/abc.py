@@ -283,7 +283,8 @@ def _digest(*arrays: np.ndarray) -> str:
     return digest.hexdigest()
 
 
-def _seed_parts(seed: int | np.random.SeedSequence | None) -> tuple[int | None, tuple[int, ...]]:
+def split_seed(seed: int | np.random.SeedSequence | None) -> tuple[int | None, tuple[int, ...]]:
+    """(entropy, spawn_key) of a seed; (None, ()) for None."""
     if seed is None:
         return None, ()
     if isinstance(seed, np.random.SeedSequence):
@@ -405,7 +406,7 @@ def abc_rejection(
     data = _prepare_observed(simulator, observed, outputs)
     full_prior = with_noise(prior, noise, data.names)
     model_names = _model_names(simulator, full_prior)
-    entropy, spawn_key = _seed_parts(seed)
+    entropy, spawn_key = split_seed(seed)
     settings = {
         "sampler": "abc_rejection",
         "n_pilot": int(n_pilot),
