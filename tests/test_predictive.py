@@ -1,0 +1,116 @@
+"""Posterior predictive on a (longer) profile: groups, bands, noise, failures, reproducibility."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pymc as pm
+import pytest
+import xarray as xr
+
+from pymc_vcc.predictive import sample_posterior_predictive
+from pymc_vcc.pymc_model import add_simulator
+from pymc_vcc.smc import sample_smc_abc
+from pymc_vcc.testing import AsDataset, Flaky, GaussianLocation, LinearGaussian
+
+
+def posterior_tree(draws: dict[str, np.ndarray]) -> xr.DataTree:
+    """A DataTree with a posterior group of (chain, draw) variables."""
+    posterior = xr.Dataset({name: (("chain", "draw"), values) for name, values in draws.items()})
+    return xr.DataTree.from_dict({"posterior": posterior})
+
+
+@pytest.fixture(scope="module")
+def line_posterior() -> xr.DataTree:
+    rng = np.random.default_rng(0)
+    return posterior_tree(
+        {
+            "a": rng.normal(2.0, 0.05, (2, 60)),
+            "b": rng.normal(-0.5, 0.1, (2, 60)),
+            "nu_y": rng.uniform(0.2, 0.3, (2, 60)),
+        }
+    )
+
+
+def test_predictive_groups_and_bands(line_posterior):
+    sim = AsDataset(LinearGaussian(n_time=40, sigma=0.01))
+    truth = sim({"a": 2.0, "b": -0.5}, np.random.default_rng(1))
+    tree = sample_posterior_predictive(
+        line_posterior, sim, reference=truth, noise=False, executor="serial", seed=3
+    )
+    predictive = tree["posterior_predictive"].to_dataset()
+    assert predictive["y"].dims == ("chain", "draw", "time")
+    assert predictive["y"].shape == (2, 60, 40)
+    bands = tree["predictive_bands"].to_dataset()
+    assert list(bands["band"].values) == ["lower", "median", "upper"]
+    np.testing.assert_allclose(bands["probability"].values, [0.05, 0.5, 0.95])
+    lower, median, upper = bands["y"].values
+    assert (lower < median).all() and (median < upper).all()
+    t = np.linspace(0.0, 1.0, 40)
+    np.testing.assert_allclose(median, 2.0 - 0.5 * t, atol=0.04)  # the posterior mean line
+    sd = np.sqrt(0.05**2 + (0.1 * t) ** 2 + 0.01**2)  # spread of a + b·t + σe over draws
+    np.testing.assert_allclose(upper - lower, 2 * 1.645 * sd, rtol=0.35)
+    assert bands.attrs["n_draws"] == 120 and bands.attrs["n_failed"] == 0
+    xr.testing.assert_equal(tree["predictive_reference"].to_dataset(), truth[["y"]])
+    assert set(tree.children) >= {"posterior", "posterior_predictive", "predictive_bands"}
+
+
+def test_noise_scales_widen_the_bands(line_posterior):
+    sim = AsDataset(LinearGaussian(n_time=40, sigma=0.01))
+    settings = {"executor": "serial", "seed": 4, "outputs": ["y"]}
+    clean = sample_posterior_predictive(line_posterior, sim, noise=False, **settings)
+    noisy = sample_posterior_predictive(line_posterior, sim, noise=True, **settings)
+    width_clean = np.diff(clean["predictive_bands"]["y"].values[[0, 2]], axis=0)
+    width_noisy = np.diff(noisy["predictive_bands"]["y"].values[[0, 2]], axis=0)
+    assert width_noisy.mean() > 1.5 * width_clean.mean()
+
+
+def test_failed_draws_are_nan_counted_and_left_out_of_the_bands(line_posterior):
+    sim = Flaky(AsDataset(LinearGaussian(n_time=20)), rate=0.3)
+    tree = sample_posterior_predictive(
+        line_posterior, sim, parameters=["a", "b"], executor="serial", seed=5
+    )
+    values = tree["posterior_predictive"]["y"].values
+    failed = np.isnan(values).all(axis=2)
+    assert failed.sum() == tree["predictive_bands"].attrs["n_failed"]
+    assert 0.15 < failed.mean() < 0.45
+    assert not np.isnan(values[~failed]).any()
+    assert np.isfinite(tree["predictive_bands"]["y"].values).all()
+    assert "exception" in tree["predictive_bands"].attrs["failure_kinds"]
+
+
+def test_results_do_not_depend_on_the_executor_and_draws_can_be_thinned(line_posterior):
+    sim = AsDataset(LinearGaussian(n_time=20))
+    settings = {"seed": 6, "max_draws": 30}
+    serial = sample_posterior_predictive(line_posterior, sim, executor="serial", **settings)
+    parallel = sample_posterior_predictive(line_posterior, sim, executor="processes", **settings)
+    xr.testing.assert_equal(
+        serial["posterior_predictive"].to_dataset(), parallel["posterior_predictive"].to_dataset()
+    )
+    assert serial["posterior_predictive"]["y"].shape == (2, 15, 20)
+
+
+def test_bad_arguments_are_named(line_posterior):
+    sim = AsDataset(LinearGaussian(n_time=20))
+    with pytest.raises(ValueError, match="interval must lie in"):
+        sample_posterior_predictive(line_posterior, sim, interval=1.0, executor="serial")
+    with pytest.raises(ValueError, match=r"posterior lacks parameter\(s\) \['c'\]"):
+        sample_posterior_predictive(line_posterior, sim, parameters=["c"], executor="serial")
+    with pytest.raises(ValueError, match="unknown outputs"):
+        sample_posterior_predictive(line_posterior, sim, outputs=["TD"], executor="serial")
+    with pytest.raises(ValueError, match="max_draws must be"):
+        sample_posterior_predictive(line_posterior, sim, max_draws=0, executor="serial")
+
+
+def test_smc_posterior_predicts_a_longer_profile():
+    short, long = GaussianLocation(n_time=50), GaussianLocation(n_time=200)
+    observed = short({"mu": 0.4}, np.random.default_rng(7))
+    with pm.Model(), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Numba will use object mode")
+        add_simulator("y", short, observed, noise=(0.0, 0.05), epsilon=0.5, distance=short.distance)
+        idata = sample_smc_abc(draws=100, executor="serial", random_seed=8, progressbar=False)
+    tree = sample_posterior_predictive(idata, long, executor="serial", seed=9)
+    assert tree["posterior_predictive"]["y"].shape == (1, 100, 200)
+    median = tree["predictive_bands"]["y"].sel(band="median").values
+    assert abs(median.mean() - idata.posterior["mu"].mean().item()) < 0.05
