@@ -99,7 +99,7 @@ class Executor(ABC):
 
     kind: ClassVar[str]
     n_workers: int
-    target_chunk_seconds: float = 0.2
+    target_chunk_seconds: float = 0.05
 
     def map(
         self, fn: Callable[[Any], Any], items: Iterable[Any], *, chunksize: int | None = None

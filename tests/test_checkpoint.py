@@ -126,9 +126,9 @@ def test_a_run_killed_with_sigkill_resumes_and_equals_an_uninterrupted_run(tmp_p
     persisted_theta = {repr(float(draws[index + n_pilot * phase])) for phase, index in persisted}
     rerun = Counter(second_calls)
     assert not persisted_theta & set(rerun), "a persisted simulation was recomputed"
-    # only simulations of the chunk running at the kill (about 0.2 s of work) ran twice
+    # only simulations of the chunk running at the kill (0.05 s of work, ~11 runs) ran twice
     twice = set(first_calls) & set(rerun)
-    assert len(twice) <= 60
+    assert len(twice) <= 20
     assert len(set(first_calls) | set(rerun)) >= int(tree.sample_stats["n_simulations"])
 
 

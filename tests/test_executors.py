@@ -72,11 +72,12 @@ def test_fast_items_travel_in_large_chunks_and_slow_ones_alone(kind, process_poo
     assert max(fast.values()) >= 100  # chunks grow once run times are known
     fixed = dict(executor.imap_unordered(_chunk_sizes, range(10), chunksize=3, batched=True))
     assert sorted(fixed.values()) == [1, 3, 3, 3, 3, 3, 3, 3, 3, 3]
+    default = executor.target_chunk_seconds
     executor.target_chunk_seconds = 0.01
     try:
         slow = executor.map(lambda x: (time.sleep(0.02), x)[1], range(6))
     finally:
-        executor.target_chunk_seconds = 0.2
+        executor.target_chunk_seconds = default
     assert slow == list(range(6))
 
 
