@@ -334,9 +334,9 @@ def _run_phase(
             for record in finished:
                 records.add(record)
             _check_failures(records, phase, size, max_failure_rate)
-            accepted = scan.accepted if scan is not None else 0
-            bar.update(records.n_done, accepted, records.n_failed)
-            if scan is not None and scan.advance():
+            stop = scan is not None and scan.advance()
+            bar.update(records.n_done, scan.accepted if scan is not None else 0, records.n_failed)
+            if stop:
                 break
     finally:
         chunks.close()

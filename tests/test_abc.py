@@ -346,3 +346,20 @@ def test_a_prior_fitted_with_noise_scales_is_used_as_is_and_must_match_their_bou
             noise={"y": (0.0, 0.1)},
             **common,
         )
+
+
+def test_progress_bar_shows_done_accepted_and_failed_when_asked(capsys):
+    model = GaussianLocation(n_time=10)
+    arguments = dict(
+        n_pilot=100, quantile=0.2, n_main=300, n_desired=300, executor="serial", seed=16
+    )
+    abc_rejection(Flaky(model, 0.2), UniformPrior(model.bounds), np.zeros((1, 10)), **arguments)
+    assert capsys.readouterr().err == ""  # off by default when not on a terminal
+    tree = abc_rejection(
+        Flaky(model, 0.2), UniformPrior(model.bounds), np.zeros((1, 10)), progress=True, **arguments
+    )
+    err = capsys.readouterr().err
+    assert "pilot" in err and "main" in err and "ETA" in err
+    main_failed = int((tree.sample_stats["sim_status"].values[100:] != "ok").sum())
+    assert f"accepted {int(tree.sample_stats['n_accepted'])}" in err
+    assert f"failed {main_failed}" in err
