@@ -129,7 +129,6 @@ _FLOW_EPS = 1e-4  # kg/s, upwind weights and |ṁ| in pressure drops
 _SRC_EPS = 1e-5  # kg/s, sign of the charge-controller source
 _DP_REG = 2e4  # Pa, valve square root
 _TANK_WIDTH = 2e3  # J/kg, tank outlet smooth max
-_HTC_BLEND = 0.1  # quality width of the HTC blend
 
 
 def n_states(n_volumes: int) -> int:
@@ -351,14 +350,14 @@ def evaluate(y, u, c, tables, dydt, out):
     flow_e = abs(m_valve) / c[C_MNOM_EVAP]
     for i in range(n):
         tw = y[n + 2 + i]
-        alpha = refrigerant_htc(x_c[i], c[C_HTC_CL], c[C_HTC_CTP], c[C_HTC_CV], flow_c, _HTC_BLEND)
+        alpha = refrigerant_htc(x_c[i], c[C_HTC_CL], c[C_HTC_CTP], c[C_HTC_CV], flow_c)
         q_ref = wall_heat(alpha, c[C_AR_COND], tw, T_c[i])
         q_air = air_side_heat(cap_c, T_air_c, tw, c[C_HTC_CA], c[C_AA_COND])
         dydt[n + 2 + i] = (q_air - q_ref) / c[C_CW_COND]
         src_c[i] = q_ref
         q_cond -= q_ref
         tw = y[3 * n + 5 + i]
-        alpha = refrigerant_htc(x_e[i], c[C_HTC_EL], c[C_HTC_ETP], c[C_HTC_EV], flow_e, _HTC_BLEND)
+        alpha = refrigerant_htc(x_e[i], c[C_HTC_EL], c[C_HTC_ETP], c[C_HTC_EV], flow_e)
         q_ref = wall_heat(alpha, c[C_AR_EVAP], tw, T_e[i])
         q_air = air_side_heat(cap_e, T_air_e, tw, c[C_HTC_EA], c[C_AA_EVAP])
         dydt[3 * n + 5 + i] = (q_air - q_ref) / c[C_CW_EVAP]

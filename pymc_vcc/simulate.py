@@ -315,3 +315,55 @@ class VCCSimulator:
             f"VCCSimulator(unit={self.unit.name!r}, outputs={list(self.output_names)}, "
             f"t_window={self.t_window})"
         )
+
+
+def operating_point(
+    unit: Unit | None = None,
+    params: Mapping[str, float] | None = None,
+    *,
+    duration: float = 1500.0,
+    controller: bool | None = None,
+    **conditions: float,
+) -> dict[str, float | str]:
+    """The (near) steady state reached after ``duration`` s at constant inputs.
+
+    ``conditions`` override the unit's rating point (``valve_opening``, ``compressor_speed``,
+    ``T_ambient``, ``T_indoor``, SI). Returns the nine outputs and the diagnostics at the end,
+    plus ``superheat`` (K, at the suction), ``subcooling`` (K, condenser outlet), ``capacity``
+    (W, evaporator heat), ``COP`` (capacity over compressor and fan power),
+    ``energy_balance_error`` ((Q_cond - Q_evap - W_ref) / Q_cond), ``drift`` (largest relative
+    change of an output over the last 100 s) and the run's ``status``/``failure_reason``.
+    """
+    from pymc_vcc.inputs import constant_inputs
+    from pymc_vcc.refrigerant import saturation_state
+
+    unit = _builtin_unit() if unit is None else unit
+    unknown = sorted(set(conditions) - set(INPUT_IDS))
+    if unknown:
+        raise ValueError(f"unknown condition(s) {unknown}; allowed are {list(INPUT_IDS)}")
+    point = {name: getattr(unit.rating, name) for name in INPUT_IDS} | conditions
+    result = simulate(
+        unit,
+        params,
+        constant_inputs(duration, **point),
+        diagnostics=True,
+        controller=controller,
+        output_interval=10.0,
+    )
+    final = {name: float(result[name].values[-1]) for name in result.data_vars}
+    tables = _fluid(unit.refrigerant).tables
+    recent = result.sel(time=slice(duration - 100.0, None))
+    drift = max(
+        float(np.ptp(recent[name].values) / abs(recent[name].values[-1])) for name in OUTPUT_IDS
+    )
+    return final | {
+        "superheat": final["TS"] - saturation_state(tables, final["PS"])[0],
+        "subcooling": saturation_state(tables, final["PC"])[0] - final["TC"],
+        "capacity": final["Q_evap"],
+        "COP": final["Q_evap"] / (final["W_comp"] + final["W_fans"]),
+        "energy_balance_error": (final["Q_cond"] - final["Q_evap"] - final["W_ref"])
+        / final["Q_cond"],
+        "drift": drift,
+        "status": result.attrs["status"],
+        "failure_reason": result.attrs["failure_reason"],
+    }

@@ -112,6 +112,16 @@ class AirProperties:
 
 
 @dataclass(frozen=True)
+class RatingPoint:
+    """Rated operating conditions of the unit (constant inputs, SI)."""
+
+    valve_opening: float  # -
+    compressor_speed: float  # Hz
+    T_ambient: float  # K
+    T_indoor: float  # K
+
+
+@dataclass(frozen=True)
 class PressureDrop:
     """Darcy friction factor of the lumped pressure drops (heat exchangers and lines)."""
 
@@ -133,6 +143,7 @@ _SECTIONS: dict[str, type] = {
     "indoor_fan": FanSettings,
     "air": AirProperties,
     "pressure_drop": PressureDrop,
+    "rating": RatingPoint,
 }
 
 _FRACTIONS = {
@@ -163,6 +174,7 @@ class Unit:
     indoor_fan: FanSettings
     air: AirProperties
     pressure_drop: PressureDrop
+    rating: RatingPoint
     parameters: ParameterTable
 
     def with_changes(self, **sections: dict[str, Any]) -> Unit:

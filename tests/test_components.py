@@ -16,7 +16,7 @@ from pymc_vcc.components.density import QUALITY_BAND, cell_state
 from pymc_vcc.components.expansion_valve import valve_mass_flow
 from pymc_vcc.components.fan import air_inlet_temperature, fan_operating_point
 from pymc_vcc.components.heat_exchanger import zone_derivatives
-from pymc_vcc.components.heat_transfer import air_side_heat, refrigerant_htc
+from pymc_vcc.components.heat_transfer import LIQUID_BLEND, air_side_heat, refrigerant_htc
 from pymc_vcc.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.components.smooth import signed_sqrt, smooth_max, smooth_pos, smooth_step
 from pymc_vcc.components.suction_tank import tank_outlet_enthalpy
@@ -131,14 +131,16 @@ def test_protection_speed_factor():
 
 
 def test_refrigerant_htc_blend():
-    args = (300.0, 3000.0, 800.0, 1.0, 0.1)
-    assert refrigerant_htc(-0.5, *args) == pytest.approx(300.0, rel=2e-3)
-    assert refrigerant_htc(0.5, *args) == pytest.approx(3000.0, rel=2e-3)
-    assert refrigerant_htc(1.5, *args) == pytest.approx(800.0, rel=2e-3)
+    args = (300.0, 3000.0, 800.0, 1.0)
+    assert refrigerant_htc(-0.1, *args) == pytest.approx(300.0, rel=2e-3)
+    assert refrigerant_htc(0.6, *args) == pytest.approx(3000.0, rel=2e-3)
+    assert refrigerant_htc(1.1, *args) == pytest.approx(800.0, rel=2e-3)
+    mid = sum(LIQUID_BLEND) / 2  # halfway up the smooth step
+    assert refrigerant_htc(mid, *args) == pytest.approx(1650.0, rel=2e-3)
     xs = np.linspace(-0.2, 1.2, 2801)
     values = np.array([refrigerant_htc(x, *args) for x in xs])
     assert np.max(np.abs(np.diff(values))) < 3000.0 * 0.01  # continuous
-    half = refrigerant_htc(0.5, 300.0, 3000.0, 800.0, 0.5, 0.1)
+    half = refrigerant_htc(0.6, 300.0, 3000.0, 800.0, 0.5)
     assert half == pytest.approx(3000.0 * math.sqrt(0.25 + 0.0025) ** 0.8)
 
 

@@ -14,7 +14,7 @@ from numba import njit
 
 from pymc_vcc.refrigerant import saturation_state, state
 
-QUALITY_BAND = 0.01
+QUALITY_BAND = 0.04
 """Half-width of the fillet in quality on either side of the bubble (x = 0) and dew (x = 1)."""
 
 

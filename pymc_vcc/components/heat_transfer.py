@@ -8,6 +8,13 @@ from numba import njit
 
 from pymc_vcc.components.smooth import smooth_step
 
+LIQUID_BLEND = (-0.05, 0.4)
+"""Quality range over which the HTC rises from the liquid to the two-phase value (the liquid
+film dominates at low quality, in evaporation and condensation alike)."""
+
+VAPOR_BLEND = (0.9, 1.05)
+"""Quality range of dry-out, from the two-phase to the vapour value."""
+
 
 @njit(cache=True)
 def refrigerant_htc(
@@ -16,17 +23,16 @@ def refrigerant_htc(
     htc_two_phase: float,
     htc_vapor: float,
     flow_ratio: float,
-    blend_width: float,
 ) -> float:
     """Refrigerant-side heat-transfer coefficient, W/(m² K).
 
-    The nominal liquid / two-phase / vapour values are blended with C¹ steps of width
-    ``blend_width`` (in quality) centred on x = 0 and x = 1 of the *unclipped* quality, and
-    scaled by (ṁ/ṁ_nom)^0.8 (Dittus–Boelter), with ``flow_ratio`` = |ṁ|/ṁ_nom floored at 0.05
-    so the wall never decouples from the fluid.
+    The nominal liquid / two-phase / vapour values are blended with C¹ steps in the *unclipped*
+    quality over :data:`LIQUID_BLEND` and :data:`VAPOR_BLEND`, and scaled by (ṁ/ṁ_nom)^0.8
+    (Dittus–Boelter), with ``flow_ratio`` = |ṁ|/ṁ_nom softly floored at 0.05 so the wall never
+    decouples from the fluid.
     """
-    to_two_phase = smooth_step(quality / blend_width + 0.5)
-    to_vapor = smooth_step((quality - 1.0) / blend_width + 0.5)
+    to_two_phase = smooth_step((quality - LIQUID_BLEND[0]) / (LIQUID_BLEND[1] - LIQUID_BLEND[0]))
+    to_vapor = smooth_step((quality - VAPOR_BLEND[0]) / (VAPOR_BLEND[1] - VAPOR_BLEND[0]))
     nominal = (
         htc_liquid * (1.0 - to_two_phase)
         + htc_two_phase * (to_two_phase - to_vapor)

@@ -1,0 +1,156 @@
+"""End-to-end simulation: charge control, energy balance, engineering directions, rated point,
+parameter influence, failure capture, the sampler-facing simulator and robustness."""
+
+import pickle
+
+import numpy as np
+import pytest
+
+from pymc_vcc.cycle import OUTPUT_IDS
+from pymc_vcc.inputs import builtin_inputs, constant_inputs
+from pymc_vcc.simulate import VCCSimulator, operating_point, simulate
+from pymc_vcc.unit import load_unit
+
+RATED_CAPACITY = 3500.0  # W
+
+
+@pytest.fixture(scope="module")
+def unit():
+    return load_unit()
+
+
+@pytest.fixture(scope="module")
+def rated(unit):
+    return operating_point(unit)
+
+
+@pytest.fixture(scope="module")
+def full_runs(unit):
+    on = simulate(unit, diagnostics=True)
+    off = simulate(unit, diagnostics=True, controller=False)
+    return on, off
+
+
+def test_full_profile_runs_with_units_and_diagnostics(full_runs):
+    run, _ = full_runs
+    assert run.attrs["status"] == "ok", run.attrs["failure_reason"]
+    assert run.sizes["time"] == 2121 and float(run.time[1] - run.time[0]) == 1.0
+    for name in OUTPUT_IDS:
+        assert "units" in run[name].attrs
+        assert np.isfinite(run[name].values).all()
+    for key in ("n_rhs", "n_steps", "wall_time", "mass_error", "source_integral"):
+        assert key in run.attrs
+    assert 0 < run.attrs["n_steps"] < 2000  # a work budget: a silent slowdown shows here
+
+
+def test_pi_loop_holds_the_charge_and_switching_it_off_drifts(full_runs, unit):
+    on, off = full_runs
+    m0 = unit.parameters["M0"].nominal
+    error_on = np.abs(on.M.values - m0) / m0
+    error_off = np.abs(off.M.values - m0) / m0
+    assert error_on.max() < 1e-4
+    assert on.attrs["mass_error"] == pytest.approx(error_on.max())
+    # without the loop, integration errors accumulate: a mean error several times larger
+    assert error_off.mean() > 3 * error_on.mean()
+    assert off.attrs["source_integral"] == 0.0 < on.attrs["source_integral"]
+
+
+def test_rated_point_capacity_cop_and_plausible_state(rated):
+    assert rated["status"] == "ok" and rated["drift"] < 1e-4
+    assert rated["capacity"] == pytest.approx(RATED_CAPACITY, rel=0.15)
+    assert 3.0 < rated["COP"] < 5.0
+    assert 22e5 < rated["PC"] < 32e5 and 8e5 < rated["PE"] < 12.5e5
+    assert rated["PS"] < rated["PE"] < rated["PC"] < rated["PD"]
+    assert 330.0 < rated["TD"] < 370.0
+    assert 2.0 < rated["superheat"] < 12.0 and 2.0 < rated["subcooling"] < 12.0
+
+
+def test_steady_energy_balance(rated):
+    assert abs(rated["energy_balance_error"]) < 0.01
+    closure = rated["Q_cond"] - rated["Q_evap"] - rated["W_ref"]
+    assert abs(closure) < 0.01 * rated["Q_cond"]
+
+
+def test_higher_compressor_speed(unit, rated):
+    faster = operating_point(unit, compressor_speed=65.0)
+    assert faster["MDOT"] > rated["MDOT"]
+    assert faster["PD"] > rated["PD"]
+    assert faster["PS"] < rated["PS"]
+
+
+def test_higher_ambient_temperature(unit, rated):
+    hotter = operating_point(unit, T_ambient=311.15)
+    assert hotter["PC"] > rated["PC"] and hotter["PD"] > rated["PD"]
+
+
+def test_more_valve_opening(unit, rated):
+    opened = operating_point(unit, valve_opening=0.44)
+    assert opened["superheat"] < rated["superheat"]
+    assert opened["PE"] > rated["PE"]
+
+
+def test_lower_charge(unit, rated):
+    smaller = operating_point(unit, {"M0": 1.1})
+    assert smaller["subcooling"] < rated["subcooling"]
+    assert smaller["PC"] < rated["PC"]
+
+
+def test_every_parameter_changes_an_output(unit):
+    inputs = builtin_inputs()
+    t_end = 300.0
+
+    def means(theta):
+        run = simulate(unit, theta, inputs, t_end=t_end, output_interval=5.0)
+        assert run.attrs["status"] == "ok", (theta, run.attrs["failure_reason"])
+        return np.array([run[name].values[4:].mean() for name in OUTPUT_IDS])
+
+    nominal = means({})
+    for spec in unit.parameters:
+        bound = spec.low if spec.nominal - spec.low > spec.high - spec.nominal else spec.high
+        moved = means({spec.id: bound})
+        change = np.max(np.abs(moved - nominal) / np.abs(nominal))
+        assert change > 1e-4, spec.id
+
+
+def test_failures_are_flagged_not_raised(unit):
+    inputs = constant_inputs(
+        600.0, valve_opening=0.4, compressor_speed=55.0, T_ambient=308.15, T_indoor=300.15
+    )
+    slow = simulate(unit, None, inputs, max_wall_time=1e-3)
+    assert slow.attrs["status"] == "failed" and "wall-clock" in slow.attrs["failure_reason"]
+    assert slow.sizes["time"] == 601 and np.isnan(slow.PD.values[-1])
+    too_much = simulate(unit, {"M0": 9.0}, inputs)
+    assert too_much.attrs["status"] == "failed"
+    assert "initial state" in too_much.attrs["failure_reason"]
+    with pytest.raises(ValueError, match="unknown parameter id"):
+        simulate(unit, {"charge": 1.0}, inputs)
+
+
+def test_simulator_interface_for_samplers(unit):
+    simulator = VCCSimulator(unit, outputs=["PD", "MDOT"], t_window=(20.0, 200.0))
+    assert simulator.parameter_names[0] == "M0" and len(simulator.parameter_names) == 26
+    assert simulator.output_names == ("PD", "MDOT")
+    clone = pickle.loads(pickle.dumps(simulator))
+    result = clone({"M0": 1.2}, np.random.default_rng(0))
+    assert list(result.data_vars) == ["PD", "MDOT"]
+    assert float(result.time[0]) == 20.0 and float(result.time[-1]) == 200.0
+    assert result.attrs["status"] == "ok"
+    again = simulator({"M0": 1.2}, np.random.default_rng(1))
+    np.testing.assert_array_equal(result.PD.values, again.PD.values)  # deterministic
+    with pytest.raises(ValueError, match="unknown output"):
+        VCCSimulator(unit, outputs=["XX"])
+    with pytest.raises(ValueError, match="t_window"):
+        VCCSimulator(unit, t_window=(100.0, 5000.0))
+
+
+@pytest.mark.slow
+def test_robust_over_the_table_iii_box(unit):
+    """A small version of the benchmark's 200 draws: >= 95 % must simulate 1060 s."""
+    simulator = VCCSimulator(unit, t_window=(0.0, 1060.0))
+    draws = unit.parameters.sample_uniform(24, np.random.default_rng(2024))
+    failures = []
+    for theta in draws:
+        result = simulator(theta, None)
+        if result.attrs["status"] != "ok":
+            failures.append((theta, result.attrs["failure_reason"]))
+    assert len(failures) <= 1, failures
