@@ -1,4 +1,4 @@
-"""The ``pymc-vcc`` command line."""
+"""The ``pymc-vcc`` command line: the paper's studies, the demo and the benchmarks."""
 
 from __future__ import annotations
 
@@ -8,6 +8,65 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+
+from pymc_vcc.executors import EXECUTOR_KINDS
+
+
+def _settings(args: argparse.Namespace):
+    from pymc_vcc.studies import StudySettings
+
+    return StudySettings(
+        budget=args.budget,
+        executor=args.executor,
+        scheduler=args.scheduler,
+        n_workers=args.workers,
+        out=Path(args.out),
+        resume=args.resume,
+        seed=args.seed,
+        progress=None if not args.json else False,
+    )
+
+
+def _report(args: argparse.Namespace, text: str, summary: dict, files: list[str]) -> int:
+    if not args.json:
+        print(text)
+        print(f"\nresults written to {args.out} ({len(files)} files)")
+    else:
+        print(json.dumps(summary))
+    return 0
+
+
+def _leak(args: argparse.Namespace) -> int:
+    from pymc_vcc.studies import leak_study
+
+    result = leak_study(
+        _settings(args),
+        references_kg=args.references,
+        sampler=args.sampler,
+        alarm_fraction=args.alarm_fraction,
+    )
+    text = (
+        f"{result.format_table()}\n\n{result.n_simulations} simulations, "
+        f"{result.wall_seconds:.0f} s, sampler {result.sampler}"
+    )
+    return _report(args, text, result.summary(), result.files)
+
+
+def _sobol(args: argparse.Namespace) -> int:
+    from pymc_vcc.studies import sobol_study
+
+    result = sobol_study(_settings(args))
+    summary = result.summary()
+    lines = [
+        f"{output:5s} {', '.join(p) or '-'}" for output, p in summary["dominant_parameters"].items()
+    ]
+    text = (
+        "parameters with total-order Sobol index > 0.1, per output:\n"
+        + "\n".join(lines)
+        + f"\n\n{summary['n_simulations']} simulations ({summary['n_failed']} failed, "
+        f"{summary['n_dropped_base_samples']} base samples dropped), {result.wall_seconds:.0f} s"
+    )
+    return _report(args, text, summary, result.files)
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -31,11 +90,38 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _demo(args: argparse.Namespace) -> int:
-    from pymc_vcc.demo import run_demo
+def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -> None:
+    parser.add_argument(
+        "--budget",
+        choices=["smoke", "small", "paper"],
+        default=budget,
+        help="work budget: smoke (seconds), small (minutes), paper (Table I)",
+    )
+    parser.add_argument("--executor", choices=list(EXECUTOR_KINDS), default="processes")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="address of a Dask scheduler")
+    parser.add_argument("--workers", type=int, help="worker processes (default: every core)")
+    parser.add_argument("--out", default=out, help=f"results folder (default {out})")
+    parser.add_argument("--resume", action="store_true", help="continue from checkpoints")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", action="store_true", help="print one JSON object last")
 
-    run_demo(Path(args.out))
-    return 0
+
+def _add_leak_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--sampler", choices=["rejection", "smc"], default="rejection")
+    parser.add_argument(
+        "--references",
+        type=float,
+        nargs="+",
+        default=[2.0, 1.5, 1.0],
+        metavar="KG",
+        help="reference charges of the datasets, kg (default: 2.0 1.5 1.0)",
+    )
+    parser.add_argument(
+        "--alarm-fraction",
+        type=float,
+        default=0.9,
+        help="leak alarm: P(M0 < fraction × first reference charge) (default 0.9)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -46,9 +132,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     commands = parser.add_subparsers(dest="command", required=True)
 
-    demo = commands.add_parser("demo", help="the main job: a small but real study")
-    demo.add_argument("--out", default="results/demo", help="results folder")
-    demo.set_defaults(handler=_demo)
+    demo = commands.add_parser(
+        "demo", help="the main job: the leak study (Table II) at a small budget on all cores"
+    )
+    _add_study_options(demo, "results/demo", "small")
+    _add_leak_options(demo)
+    demo.set_defaults(handler=_leak)
+
+    leak = commands.add_parser("leak", help="refrigerant-leak identification (Table II)")
+    _add_study_options(leak, "results/leak", "small")
+    _add_leak_options(leak)
+    leak.set_defaults(handler=_leak)
+
+    sobol = commands.add_parser("sobol", help="Sobol sensitivity (Figs. 9 and 10)")
+    _add_study_options(sobol, "results/sobol", "small")
+    sobol.set_defaults(handler=_sobol)
 
     bench = commands.add_parser("bench", help="speed benchmarks")
     bench.add_argument("--json", action="store_true", help="print one JSON object last")

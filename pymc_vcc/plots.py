@@ -128,3 +128,25 @@ def plot_sobol_heatmap(indices: xr.Dataset, order: str = "S1") -> Figure:
     figure.colorbar(image, ax=ax, fraction=0.05)
     figure.tight_layout()
     return figure
+
+
+def plot_charge_posteriors(
+    trees: Sequence[xr.DataTree], references: Sequence[float], parameter: str = "M0"
+) -> Figure:
+    """Table II as a figure: the charge posterior of each dataset with its reference value."""
+    figure, ax = plt.subplots(figsize=(6.0, 3.0))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    draws = [tree["posterior"][parameter].values.ravel() for tree in trees]
+    every = np.concatenate([np.asarray(references, dtype=float), *draws])
+    low, high = float(every.min()), float(every.max())
+    pad = 0.1 * (high - low)
+    for index, (samples, reference) in enumerate(zip(draws, references, strict=True)):
+        colour = colours[index % len(colours)]
+        _kde_line(ax, samples, low - pad, high + pad, color=colour, label=f"{reference} kg")
+        ax.axvline(reference, color=colour, linestyle="--", linewidth=1)
+    ax.set_xlabel("total refrigerant mass M0 (kg)")
+    ax.set_yticks([])
+    ax.set_title("charge posteriors (dashed: reference)")
+    ax.legend(fontsize=8)
+    figure.tight_layout()
+    return figure

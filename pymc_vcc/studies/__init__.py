@@ -1,0 +1,18 @@
+"""The paper's studies as functions: parameter estimation, refrigerant-leak identification and
+Sobol sensitivity. Each returns its results (DataTrees, Datasets) and, given a folder, writes
+them with their figures and tables; the ``pymc-vcc`` command runs them.
+"""
+
+from pymc_vcc.studies.common import BUDGETS, Budget, StudySettings
+from pymc_vcc.studies.leak import LeakResult, leak_study
+from pymc_vcc.studies.sobol import SobolResult, sobol_study
+
+__all__ = [
+    "BUDGETS",
+    "Budget",
+    "LeakResult",
+    "SobolResult",
+    "StudySettings",
+    "leak_study",
+    "sobol_study",
+]

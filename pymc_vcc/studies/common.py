@@ -1,0 +1,131 @@
+"""What every study shares: work budgets, settings (executor, seed, output folder) and files."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from pymc_vcc.executors import EXECUTOR_KINDS, Executor, make_executor
+
+
+@dataclass(frozen=True)
+class Budget:
+    """How much work a study may do.
+
+    Attributes:
+        n_pilot, quantile, n_main, n_desired: the rejection sampler's settings (Table I).
+        smc_draws: SMC-ABC particles per stage.
+        sobol_base: Saltelli base samples of the Sobol study (N · (D + 2) simulations).
+        predictive_draws: posterior draws simulated for the posterior predictive.
+    """
+
+    name: str
+    n_pilot: int
+    quantile: float
+    n_main: int
+    n_desired: int
+    smc_draws: int
+    sobol_base: int
+    predictive_draws: int
+
+
+BUDGETS: dict[str, Budget] = {
+    budget.name: budget
+    for budget in (
+        Budget("smoke", 8, 0.25, 32, 3, smc_draws=8, sobol_base=2, predictive_draws=4),
+        Budget("small", 100, 0.1, 400, 40, smc_draws=64, sobol_base=32, predictive_draws=50),
+        Budget(
+            "paper", 5000, 0.05, 80000, 4000, smc_draws=2000, sobol_base=10000, predictive_draws=500
+        ),
+    )
+}
+"""Budgets by name: ``smoke`` (seconds, for tests), ``small`` (minutes), ``paper`` (Table I)."""
+
+
+def get_budget(name: str | Budget) -> Budget:
+    """The budget called ``name`` (a :class:`Budget` passes through)."""
+    if isinstance(name, Budget):
+        return name
+    if name not in BUDGETS:
+        raise ValueError(f"unknown budget {name!r}; choose one of {list(BUDGETS)}")
+    return BUDGETS[name]
+
+
+@dataclass(frozen=True)
+class StudySettings:
+    """Where and how a study runs.
+
+    Attributes:
+        budget: a budget name or :class:`Budget`.
+        executor: ``"serial"``, ``"processes"`` (all cores) or ``"dask"``.
+        scheduler: address of a running Dask scheduler (None: a local cluster for ``"dask"``).
+        n_workers: worker processes (default: every core).
+        out: results folder (None: nothing written).
+        resume: continue from the checkpoints in ``out`` instead of starting afresh.
+        seed: seeds the datasets' draws and every sampler.
+        progress: show progress bars (default: when standard error is a terminal).
+    """
+
+    budget: str | Budget = "small"
+    executor: str = "processes"
+    scheduler: str | None = None
+    n_workers: int | None = None
+    out: Path | None = None
+    resume: bool = False
+    seed: int = 0
+    progress: bool | None = None
+
+    def __post_init__(self) -> None:
+        get_budget(self.budget)
+        if self.executor not in EXECUTOR_KINDS:
+            raise ValueError(
+                f"executor must be one of {list(EXECUTOR_KINDS)}, got {self.executor!r}"
+            )
+        if self.scheduler is not None and self.executor != "dask":
+            raise ValueError("scheduler is the address of a Dask scheduler: use executor='dask'")
+        if self.out is not None:
+            object.__setattr__(self, "out", Path(self.out))
+
+    @property
+    def work(self) -> Budget:
+        """The :class:`Budget` in force."""
+        return get_budget(self.budget)
+
+    @contextmanager
+    def open_executor(self) -> Iterator[Executor]:
+        """An executor of the configured kind, closed on exit."""
+        with make_executor(self.executor, self.n_workers, address=self.scheduler) as executor:
+            yield executor
+
+    def checkpoint(self, name: str) -> Path | None:
+        """Checkpoint file ``<out>/checkpoints/<name>.sqlite``; removed first unless resuming."""
+        if self.out is None:
+            return None
+        path = self.out / "checkpoints" / f"{name}.sqlite"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if not self.resume:
+            path.unlink(missing_ok=True)
+        return path
+
+    def seeds(self, n: int) -> list[np.random.SeedSequence]:
+        """``n`` independent seed sequences derived from ``seed``."""
+        return np.random.SeedSequence(self.seed).spawn(n)
+
+
+def write_json(path: Path, payload: dict[str, Any]) -> None:
+    """Write ``payload`` as indented JSON."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
+def write_tree(tree: xr.DataTree, path: Path) -> None:
+    """Save a DataTree as netCDF (reloads with ``xarray.open_datatree`` / ArviZ)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tree.to_netcdf(path, engine="h5netcdf")

@@ -1,0 +1,109 @@
+"""The studies run end to end at the smoke budget, write their files, and resume after a kill."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from pymc_vcc.cli import main
+from pymc_vcc.studies import StudySettings, leak_study
+from pymc_vcc.studies.leak import leak_alarm
+
+
+def test_leak_command_writes_table_ii_and_reloadable_trees(tmp_path, capsys):
+    out = tmp_path / "leak"
+    main(
+        [
+            "leak",
+            "--budget",
+            "smoke",
+            "--references",
+            "2.0",
+            "1.2",
+            "--out",
+            str(out),
+            "--json",
+            "--executor",
+            "serial",
+        ]
+    )
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert set(summary) >= {"rows", "n_simulations", "wall_seconds", "sampler"}
+    assert summary["sampler"] == "rejection"
+    assert [row["reference_kg"] for row in summary["rows"]] == [2.0, 1.2]
+    for row in summary["rows"]:
+        assert set(row) >= {"reference_kg", "mean_kg", "sd_kg"}
+        assert 0.9 <= row["mean_kg"] <= 2.2
+    # two charges 0.8 kg apart are told apart even at the smoke budget
+    assert summary["rows"][0]["mean_kg"] > summary["rows"][1]["mean_kg"]
+    folder = out / "leak"
+    for name in (
+        "table_ii.csv",
+        "table_ii.txt",
+        "summary.json",
+        "charge_posteriors.png",
+        "charge_posteriors.svg",
+    ):
+        assert (folder / name).stat().st_size > 0
+    tree = xr.open_datatree(folder / "posterior_0.nc", engine="h5netcdf")
+    assert {"posterior", "prior", "observed_data", "sample_stats"} <= set(tree.children)
+    assert "M0" in tree["posterior"].data_vars
+
+
+def test_leak_alarm_counts_draws_below_threshold():
+    posterior = xr.Dataset({"M0": (("chain", "draw"), np.array([[1.0, 1.5, 1.9, 2.0]]))})
+    tree = xr.DataTree.from_dict({"posterior": posterior})
+    assert leak_alarm(tree, 1.8) == pytest.approx(0.5)
+
+
+def test_bad_study_settings_are_clear_errors():
+    with pytest.raises(ValueError, match="unknown budget"):
+        StudySettings(budget="huge")
+    with pytest.raises(ValueError, match="executor"):
+        StudySettings(executor="gpu")
+    with pytest.raises(ValueError, match="references_kg"):
+        leak_study(StudySettings(budget="smoke", executor="serial"), references_kg=[3.0])
+    with pytest.raises(ValueError, match="sampler"):
+        leak_study(StudySettings(budget="smoke", executor="serial"), sampler="mcmc")
+
+
+def test_killed_leak_run_resumes_and_completes(tmp_path):
+    out = tmp_path / "resume"
+    command = [
+        sys.executable,
+        "-m",
+        "pymc_vcc.cli",
+        "leak",
+        "--budget",
+        "smoke",
+        "--references",
+        "1.6",
+        "--executor",
+        "serial",
+        "--out",
+        str(out),
+        "--json",
+    ]
+    checkpoint = out / "checkpoints" / "leak_0.sqlite"
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        if checkpoint.exists() and checkpoint.stat().st_size > 0:
+            time.sleep(2.0)  # let a few simulations land
+            break
+        time.sleep(0.2)
+    if process.poll() is None:
+        os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    assert checkpoint.exists()
+    finished = subprocess.run([*command, "--resume"], capture_output=True, text=True, timeout=300)
+    assert finished.returncode == 0, finished.stderr
+    summary = json.loads(finished.stdout.strip().splitlines()[-1])
+    assert summary["rows"][0]["reference_kg"] == 1.6
+    assert (out / "leak" / "table_ii.csv").exists()
