@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import xarray as xr
@@ -51,7 +52,7 @@ class ObservedData:
     values: np.ndarray
     dataset: xr.Dataset
 
-    @property
+    @cached_property
     def row_indices(self) -> tuple[int, ...]:
         """Positions of ``names`` among ``all_names`` (the rows taken from simulated arrays)."""
         return tuple(self.all_names.index(name) for name in self.names)

@@ -108,6 +108,13 @@ def test_unknown_kind_and_bad_sizes_are_clear_errors():
         make_executor("serial").map(abs, [1], chunksize=0)
 
 
+def test_dask_executor_starts_and_closes_its_own_local_cluster():
+    with make_executor("dask", n_workers=1) as executor:
+        assert executor.n_workers == 1
+        assert executor.map(_seeded_draw, range(20)) == [_seeded_draw(i) for i in range(20)]
+    assert executor.client.status == "closed"
+
+
 @contextlib.contextmanager
 def dask_cli_cluster(directory: Path, n_workers: int = 2):
     """A real ``dask scheduler`` and ``n_workers`` ``dask worker`` processes on 127.0.0.1."""
