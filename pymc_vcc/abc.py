@@ -87,7 +87,9 @@ class SimulationTask:
     spawn_key: tuple[int, ...]
     time_limit: float | None
 
-    def add_noise(self, values: np.ndarray, theta: np.ndarray, rng: np.random.Generator):
+    def add_noise(
+        self, values: np.ndarray, theta: np.ndarray, rng: np.random.Generator
+    ) -> np.ndarray:
         """Y + ν·|Y|·Z with ν per output (0 for outputs without a noise scale)."""
         if all(column < 0 for column in self.noise_columns):
             return values

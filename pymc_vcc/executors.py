@@ -12,6 +12,10 @@ worker processes too) and items travel in chunks sized from measured run times (
 ``target_chunk_seconds`` of work each), which keeps per-item overhead small for fast functions
 and gives single-item chunks for slow ones. Results never depend on the backend: randomness must
 come with the items (e.g. a seed per item), never from worker state.
+
+Worker processes start with ``forkserver`` (safe in programs that run threads, as PyMC, Dask and
+BLAS do): a script using the ``"processes"`` executor needs the usual
+``if __name__ == "__main__":`` guard around its main code, as any multiprocessing script does.
 """
 
 from __future__ import annotations
