@@ -4,4 +4,4 @@ Each module here exposes ``run(quick: bool) -> dict[str, float | int | str]``; t
 them in the order of :data:`BENCHMARKS` and merges their results into one JSON object.
 """
 
-BENCHMARKS: tuple[str, ...] = ("properties", "sampler", "simulator")
+BENCHMARKS: tuple[str, ...] = ("properties", "sampler", "simulator", "smc")
