@@ -294,7 +294,7 @@ def evaluate(y, u, c, tables, dydt, out):
     # ---- suction tank, suction pressure, compressor
     h_vap_e = saturation_state(tables, p_e)[2]
     h_suc = tank_outlet_enthalpy(h_ze[n + 1], h_vap_e, _TANK_WIDTH)
-    rho_out = cell_state(tables, p_e, h_suc)[1]
+    rho_out = state(tables, p_e, h_suc)[1]
     eta_guess = volumetric_efficiency(p_c / p_e, c[C_CLEARANCE], c[C_EXPONENT], c[C_CF_VOL])
     speed = speed * protection_speed_factor(p_c, c[C_P_PROT_START], c[C_P_PROT_STOP])
     m_guess = eta_guess * rho_out * c[C_DISPLACEMENT] * speed
@@ -302,7 +302,7 @@ def evaluate(y, u, c, tables, dydt, out):
         c[C_K_VAP], m_guess, rho_out, _FLOW_EPS
     )
     p_s = p_e - dp_suction
-    T_s, rho_s = cell_state(tables, p_s, h_suc)[:2]
+    T_s, rho_s = state(tables, p_s, h_suc)[:2]
     p_d = p_c + pressure_drop(c[C_K_COND], m_guess, rho_mean_c, _FLOW_EPS)
     m_comp, h_d, w_comp, w_ref = compressor(
         tables,

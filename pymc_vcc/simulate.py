@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import xarray as xr
 from scipy.integrate import Radau
+from scipy.linalg import get_lapack_funcs
 
 from pymc_vcc.cycle import (
     C_M0,
@@ -223,6 +224,7 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
             )
         except ValueError as error:
             return f"solver start at t = {t0:.1f} s: {error}"
+        _use_direct_lapack(solver)
         while solver.status == "running":
             try:
                 message = solver.step()
@@ -245,6 +247,31 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
                 return f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s"
         y = solver.y
     return ""
+
+
+_LAPACK_REAL = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1),))
+_LAPACK_COMPLEX = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1, dtype=complex),))
+
+
+def _use_direct_lapack(solver: Radau) -> None:
+    """Give scipy's Radau direct LAPACK getrf/getrs for its dense LU work.
+
+    Same factorisations as ``scipy.linalg.lu_factor``/``lu_solve`` without their per-call
+    argument checking, which costs more than the 46 x 46 factorisation itself.
+    """
+
+    def lu(matrix):
+        solver.nlu += 1
+        getrf, getrs = _LAPACK_COMPLEX if np.iscomplexobj(matrix) else _LAPACK_REAL
+        factors, pivots, _ = getrf(matrix, overwrite_a=True)
+        return factors, pivots, getrs
+
+    def solve_lu(decomposition, rhs):
+        factors, pivots, getrs = decomposition
+        return getrs(factors, pivots, rhs)[0]
+
+    solver.lu = lu
+    solver.solve_lu = solve_lu
 
 
 class VCCSimulator:

@@ -5,7 +5,7 @@ fourteenfold at the bubble line at 27 bar). A stiff solver cannot resolve a stat
 kink within a step, and the total mass Σ V ρ then jumps by up to 1e-4 of the charge at every
 crossing. Within ±``band`` (in quality) of each line, the density is replaced by the cubic Hermite
 fillet matching the tabulated value and ∂ρ/∂h at both band edges; ∂ρ/∂p of the blended density
-is a central difference, so the balances stay consistent with M = Σ V ρ.
+is a forward difference (relative step 1e-6), so the balances stay consistent with M = Σ V ρ.
 """
 
 from __future__ import annotations
@@ -66,5 +66,4 @@ def cell_state(tables, p: float, h: float) -> tuple[float, float, float, float, 
     rho, drho_dh = _fillet(tables, p, h, centre, QUALITY_BAND)
     dp = 1e-6 * p
     up = _fillet(tables, p + dp, h, centre, QUALITY_BAND)[0]
-    down = _fillet(tables, p - dp, h, centre, QUALITY_BAND)[0]
-    return T, rho, (up - down) / (2.0 * dp), drho_dh, x
+    return T, rho, (up - rho) / dp, drho_dh, x
