@@ -150,3 +150,53 @@ def plot_charge_posteriors(
     ax.legend(fontsize=8)
     figure.tight_layout()
     return figure
+
+
+def plot_predictive(
+    tree: xr.DataTree,
+    outputs: Sequence[str] | None = None,
+    *,
+    calibration_end: float | None = None,
+    uncalibrated: xr.Dataset | None = None,
+    n_columns: int = 3,
+) -> Figure:
+    """Figs. 6 and 8: posterior predictive median and central band against the ground truth.
+
+    Reads the ``predictive_bands`` group (and ``predictive_reference``, the truth, if present)
+    written by :func:`pymc_vcc.predictive.sample_posterior_predictive`; ``uncalibrated`` adds
+    the outputs of an uncalibrated model (Fig. 8). The calibration window's end is dashed.
+    """
+    if "predictive_bands" not in tree.children:
+        raise ValueError("tree has no predictive_bands group; run sample_posterior_predictive")
+    bands = tree["predictive_bands"].to_dataset()
+    reference = (
+        tree["predictive_reference"].to_dataset()
+        if "predictive_reference" in tree.children
+        else None
+    )
+    names = list(outputs) if outputs is not None else list(bands.data_vars)
+    figure, axes = _grid(len(names), n_columns, (4.0, 2.5))
+    time = bands["time"].values
+    percent = round(100 * float(bands.attrs.get("interval", 0.9)))
+    for ax, name in zip(axes, names, strict=False):
+        units = bands[name].attrs.get("units", "")
+        lower, median, upper = (
+            display(bands[name].sel(band=band).values, units)[0]
+            for band in ("lower", "median", "upper")
+        )
+        ax.fill_between(time, lower, upper, color="tab:blue", alpha=0.25, label=f"{percent} % band")
+        ax.plot(time, median, color="tab:blue", label="predictive median")
+        if reference is not None and name in reference:
+            truth, _ = display(reference[name].values, units)
+            ax.plot(reference["time"].values, truth, color="black", linestyle=":", label="truth")
+        if uncalibrated is not None and name in uncalibrated:
+            values, _ = display(uncalibrated[name].values, units)
+            ax.plot(uncalibrated["time"].values, values, color="tab:red", label="uncalibrated")
+        if calibration_end is not None:
+            ax.axvline(calibration_end, color="grey", linestyle="--", linewidth=1)
+        ax.set_title(name, fontsize=9)
+        ax.set_ylabel(display(np.zeros(1), units)[1])
+        ax.set_xlabel("time (s)")
+    axes[0].legend(fontsize=6)
+    figure.tight_layout()
+    return figure

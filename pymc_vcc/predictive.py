@@ -177,7 +177,8 @@ def sample_posterior_predictive(
             for name in noise_names
         ]
     )
-    seeds = np.random.SeedSequence(seed).spawn(n_chains * n_draws)
+    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    seeds = root.spawn(n_chains * n_draws)
     items = [
         ({name: float(values[name][i]) for name in parameters}, scales[i], seeds[i])
         for i in range(n_chains * n_draws)

@@ -107,3 +107,35 @@ def test_killed_leak_run_resumes_and_completes(tmp_path):
     summary = json.loads(finished.stdout.strip().splitlines()[-1])
     assert summary["rows"][0]["reference_kg"] == 1.6
     assert (out / "leak" / "table_ii.csv").exists()
+
+
+def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys):
+    out = tmp_path / "estimate"
+    main(["estimate", "--budget", "smoke", "--out", str(out), "--json"])
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert set(summary) >= {"truths", "posterior_means", "sd_ratio", "n_simulations"}
+    assert len(summary["truths"]) == 2 and len(summary["truths"][0]) == 26
+    folder = out / "estimate"
+    for stem in (
+        "fig4_inputs",
+        "fig5_kde_dataset1",
+        "fig6_predictive_dataset1",
+        "fig7_kde_dataset2",
+        "fig8_predictive_dataset2",
+    ):
+        assert (folder / f"{stem}.png").stat().st_size > 10_000
+        assert (folder / f"{stem}.svg").exists()
+    predictive = xr.open_datatree(folder / "predictive_2.nc", engine="h5netcdf")
+    assert {"posterior", "posterior_predictive", "predictive_bands"} <= set(predictive.children)
+    assert float(predictive["predictive_bands"]["time"].max()) == 2120.0
+
+
+def test_sobol_command_writes_heatmaps(tmp_path, capsys):
+    out = tmp_path / "sobol"
+    main(["sobol", "--budget", "smoke", "--out", str(out), "--json"])
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["n_simulations"] == 2 * 28
+    indices = xr.open_dataset(out / "sobol" / "sobol_indices.nc", engine="h5netcdf")
+    assert indices["S1"].shape == (26, 9)
+    for stem in ("sobol_first_order", "sobol_total_order"):
+        assert (out / "sobol" / f"{stem}.png").exists()

@@ -4,15 +4,18 @@ them with their figures and tables; the ``pymc-vcc`` command runs them.
 """
 
 from pymc_vcc.studies.common import BUDGETS, Budget, StudySettings
+from pymc_vcc.studies.estimate import EstimationResult, estimation_study
 from pymc_vcc.studies.leak import LeakResult, leak_study
 from pymc_vcc.studies.sobol import SobolResult, sobol_study
 
 __all__ = [
     "BUDGETS",
     "Budget",
+    "EstimationResult",
     "LeakResult",
     "SobolResult",
     "StudySettings",
+    "estimation_study",
     "leak_study",
     "sobol_study",
 ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -112,6 +113,16 @@ class StudySettings:
         path.parent.mkdir(parents=True, exist_ok=True)
         if not self.resume:
             path.unlink(missing_ok=True)
+        return path
+
+    def checkpoint_folder(self, name: str) -> Path | None:
+        """Checkpoint folder ``<out>/checkpoints/<name>``; emptied first unless resuming."""
+        if self.out is None:
+            return None
+        path = self.out / "checkpoints" / name
+        if path.exists() and not self.resume:
+            shutil.rmtree(path)
+        path.mkdir(parents=True, exist_ok=True)
         return path
 
     def seeds(self, n: int) -> list[np.random.SeedSequence]:
