@@ -205,3 +205,20 @@ def test_kernel_needs_a_simulator_node_and_a_real_executor():
             pm.sample_smc(draws=10, kernel=ParallelIMH, executor="processes", chains=1, **QUIET)
         with pytest.raises(ValueError, match="chains must be a positive integer"):
             sample_smc_abc(draws=10, chains=0)
+
+
+@pytest.mark.slow
+def test_charge_calibration_on_the_vcc_simulator_recovers_the_true_charge():
+    from pymc_vcc.simulate import VCCSimulator
+
+    # 230 s of the Fig. 4 profile (compressor step at 120 s), 30 particles, 2 workers.
+    sim = VCCSimulator(t_window=(20.0, 250.0))
+    observed = sim({"M0": 1.5})
+    assert observed.attrs["status"] == "ok"
+    with pm.Model():
+        add_simulator("vcc", sim, observed, parameters=["M0"], epsilon=0.1)
+        idata = sample_smc_abc(draws=30, executor="processes", n_workers=2, random_seed=1, **QUIET)
+    charge = idata.posterior["M0"].values.ravel()
+    assert abs(charge.mean() - 1.5) < 0.05  # kg; the prior spans [0.9, 2.2]
+    assert charge.std() < 0.1
+    assert idata.sample_stats.attrs["n_simulations"] < 600
