@@ -231,6 +231,35 @@ def build_constants(unit: Unit, theta: np.ndarray, controller: bool | None = Non
 
 
 @njit(cache=True)
+def cell_properties(y, tables, props):
+    """Fill ``props`` (shape (5, 2N + 3): T, ρ, ∂ρ/∂p, ∂ρ/∂h, quality) for every cell: columns
+    0..N of the high-side zone, then N + 1 columns of the low-side zone. Returns False if a
+    property left the tables."""
+    n = (y.size - 6) // 4
+    for i in range(2 * n + 3):
+        _cell_row(y, n, i, tables, props)
+    return bool(np.isfinite(props[1]).all())
+
+
+@njit(cache=True)
+def _cell_row(y, n, i, tables, props):
+    """Properties of cell ``i`` (numbered as in :func:`cell_properties`)."""
+    if i <= n:
+        p = y[0]
+        h = y[1 + i] if i < n else y[n + 1]
+    else:
+        k = i - n - 1
+        p = y[2 * n + 2]
+        h = y[2 * n + 3 + k] if k < n else y[3 * n + 3 + (k - n)]
+    T, rho, drho_dp, drho_dh, x = cell_state(tables, p, h)
+    props[0, i] = T
+    props[1, i] = rho
+    props[2, i] = drho_dp
+    props[3, i] = drho_dh
+    props[4, i] = x
+
+
+@njit(cache=True)
 def evaluate(y, u, c, tables, dydt, out):
     """Right-hand side and outputs at state ``y`` under inputs ``u``.
 
@@ -239,13 +268,22 @@ def evaluate(y, u, c, tables, dydt, out):
     Returns False when a property evaluation left the tables (outputs then hold NaN).
     """
     n = (y.size - 6) // 4
+    props = np.empty((5, 2 * n + 3))
+    cell_properties(y, tables, props)
+    return balances(y, u, c, tables, props, dydt, out)
+
+
+@njit(cache=True)
+def balances(y, u, c, tables, props, dydt, out):
+    """:func:`evaluate` given the cell properties ``props`` of :func:`cell_properties`."""
+    n = (y.size - 6) // 4
     opening, speed, T_amb, T_ind = u[0], u[1], u[2], u[3]
     i_pe = 2 * n + 2
     p_c = y[0]
     p_e = y[i_pe]
     z = y[4 * n + 5]
 
-    # ---- properties of both zones
+    # ---- cells of both zones
     nc = n + 1
     ne = n + 2
     h_zc = np.empty(nc)
@@ -261,26 +299,24 @@ def evaluate(y, u, c, tables, dydt, out):
     vol_e = np.full(ne, c[C_V_EVAP])
     vol_e[n] = c[C_V_VAP]
     vol_e[n + 1] = c[C_V_TANK]
-    T_c = np.empty(nc)
-    rho_c = np.empty(nc)
-    rp_c = np.empty(nc)
-    rh_c = np.empty(nc)
-    x_c = np.empty(nc)
-    T_e = np.empty(ne)
-    rho_e = np.empty(ne)
-    rp_e = np.empty(ne)
-    rh_e = np.empty(ne)
-    x_e = np.empty(ne)
+    T_c = props[0, :nc]
+    rho_c = props[1, :nc]
+    rp_c = props[2, :nc]
+    rh_c = props[3, :nc]
+    x_c = props[4, :nc]
+    T_e = props[0, nc:]
+    rho_e = props[1, nc:]
+    rp_e = props[2, nc:]
+    rh_e = props[3, nc:]
+    x_e = props[4, nc:]
     mass = 0.0
     mass_cond = 0.0
     mass_evap = 0.0
     for i in range(nc):
-        T_c[i], rho_c[i], rp_c[i], rh_c[i], x_c[i] = cell_state(tables, p_c, h_zc[i])
         mass += vol_c[i] * rho_c[i]
         if i < n:
             mass_cond += vol_c[i] * rho_c[i]
     for i in range(ne):
-        T_e[i], rho_e[i], rp_e[i], rh_e[i], x_e[i] = cell_state(tables, p_e, h_ze[i])
         mass += vol_e[i] * rho_e[i]
         if i < n:
             mass_evap += vol_e[i] * rho_e[i]
@@ -416,18 +452,43 @@ def rhs(y, u, c, tables):
 
 @njit(cache=True)
 def jacobian(y, u, c, tables, f0):
-    """Dense forward-difference Jacobian ∂f/∂y at ``y`` (``f0`` = f(y)), computed in Numba."""
-    n = y.size
-    jac = np.empty((n, n))
+    """Dense forward-difference Jacobian ∂f/∂y at ``y`` (``f0`` = f(y)), computed in Numba.
+
+    Each column re-evaluates only the cell properties its variable touches: none for wall
+    temperatures and the controller integral, one cell for an enthalpy, one zone for a
+    pressure; the balances are always recomputed.
+    """
+    size = y.size
+    n = (size - 6) // 4
+    nc = n + 1
+    i_pe = 2 * n + 2
+    jac = np.empty((size, size))
+    props = np.empty((5, 2 * n + 3))
+    cell_properties(y, tables, props)
+    base = props.copy()
     work = y.copy()
-    dydt = np.empty(n)
+    dydt = np.empty(size)
     out = np.empty(N_EVAL)
-    for j in range(n):
+    for j in range(size):
         step = 1e-7 * max(abs(y[j]), 1.0)
         work[j] = y[j] + step
-        evaluate(work, u, c, tables, dydt, out)
-        for i in range(n):
+        first, last = 0, -1  # the cells whose properties this variable changes
+        if j == 0:
+            first, last = 0, n
+        elif j <= n + 1:
+            first = last = j - 1
+        elif j == i_pe:
+            first, last = nc, 2 * n + 2
+        elif i_pe < j <= 3 * n + 4:
+            first = last = nc + (j - i_pe - 1)
+        for i in range(first, last + 1):
+            _cell_row(work, n, i, tables, props)
+        balances(work, u, c, tables, props, dydt, out)
+        for i in range(size):
             jac[i, j] = (dydt[i] - f0[i]) / step
+        for i in range(first, last + 1):
+            for k in range(5):
+                props[k, i] = base[k, i]
         work[j] = y[j]
     return jac
 
