@@ -24,11 +24,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pymc as pm
 import pytensor.tensor as pt
+from pymc.distributions.shape_utils import rv_size_is_none
 from pymc.logprob.transforms import Transform
 from pytensor.graph.basic import Apply
 from pytensor.graph.op import Op
 from pytensor.tensor.variable import TensorVariable
-from scipy.special import expit
 
 from pymc_vcc.abc import NOISE_PREFIX, noise_parameter, with_noise
 from pymc_vcc.distances import BatchDistance, ks_distances
@@ -167,6 +167,17 @@ def _gmm_logp(value, weights, means, inverse_cholesky, log_det, lower, upper):
     return pt.switch(inside, density, -np.inf)
 
 
+def _gmm_support_point(rv, size, weights, means, inverse_cholesky, log_det, lower, upper):
+    """A start inside the box: the mixture's mean in logit space, mapped to the bounds.
+
+    (Not an ``initval``: SMC would start every particle there instead of drawing the prior.)
+    """
+    centre = lower + (upper - lower) * pt.sigmoid(pt.sum(weights[..., None] * means, axis=-2))
+    if rv_size_is_none(size):
+        return centre
+    return pt.broadcast_to(centre, pt.concatenate([size, centre.shape[-1:]]))
+
+
 @dataclass(frozen=True)
 class _GMMRandom:
     """Random draws of a :class:`GMMPrior` in the form ``pm.CustomDist`` expects."""
@@ -213,8 +224,6 @@ def gmm_prior_variable(name: str, prior: GMMPrior, **kwargs) -> TensorVariable:
     """
     if not isinstance(prior, GMMPrior):
         raise TypeError(f"prior must be a GMMPrior, got {type(prior).__name__}")
-    centre = prior.weights @ prior.means  # mixture mean in logit space, a valid start
-    kwargs.setdefault("initval", prior.lower + (prior.upper - prior.lower) * expit(centre))
     inverse_cholesky = np.linalg.inv(np.linalg.cholesky(prior.covariances))
     log_det = np.linalg.slogdet(prior.covariances)[1]
     return pm.CustomDist(
@@ -227,6 +236,7 @@ def gmm_prior_variable(name: str, prior: GMMPrior, **kwargs) -> TensorVariable:
         prior.upper,
         logp=_gmm_logp,
         random=_GMMRandom(prior),
+        support_point=_gmm_support_point,
         signature="(k),(k,d),(k,d,d),(k),(d),(d)->(d)",
         transform=LogitBox(prior.lower, prior.upper),
         **kwargs,

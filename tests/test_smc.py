@@ -11,6 +11,7 @@ import pytest
 from scipy import stats
 
 from pymc_vcc.executors import make_executor
+from pymc_vcc.priors import GMMPrior
 from pymc_vcc.pymc_model import add_simulator
 from pymc_vcc.smc import ParallelIMH, sample_smc_abc
 from pymc_vcc.testing import Flaky, GaussianLocation, LinearGaussian, ShiftedProfile
@@ -123,6 +124,27 @@ def test_ks_kernel_matches_the_exact_abc_posterior(epsilon):
     draws = idata.posterior["mu"].values.ravel()
     assert abs(draws.mean() - mean) < 0.3 * sd
     assert 0.85 < draws.std() / sd < 1.15
+
+
+def test_sequential_step_with_a_gmm_prior_combines_both_datasets():
+    # With a flat prior and ε-inflated Gaussian likelihoods N(ȳ_k; mu, se²(1 + ε²)), the
+    # posterior after two datasets is N((ȳ_1 + ȳ_2)/2, se²(1 + ε²)/2); the GMM carries the first.
+    sim = GaussianLocation(n_time=30)
+    datasets = [sim({"mu": 0.5}, np.random.default_rng(seed)) for seed in (10, 11)]
+    epsilon = 0.5
+    with pm.Model():
+        add_simulator("y", sim, datasets[0], epsilon=epsilon, distance=sim.distance)
+        first = sample_smc_abc(draws=300, executor="serial", random_seed=0, **QUIET)
+    prior = GMMPrior.fit(first, sim.bounds, max_components=2, seed=0)
+    with pm.Model() as model:
+        add_simulator("y", sim, datasets[1], prior=prior, epsilon=epsilon, distance=sim.distance)
+        second = sample_smc_abc(draws=300, executor="serial", random_seed=1, **QUIET)
+    assert [v.name for v in model.free_RVs] == ["y_theta"]
+    mean = np.mean([data.mean() for data in datasets])
+    sd = sim.standard_error * np.sqrt((1 + epsilon**2) / 2)
+    draws = second.posterior["mu"].values.ravel()
+    assert abs(draws.mean() - mean) < 0.3 * sd
+    assert 0.8 < draws.std() / sd < 1.25
 
 
 def test_failed_simulations_are_zero_likelihood_and_counted():
