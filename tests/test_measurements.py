@@ -1,0 +1,284 @@
+"""Measured CSV logs: units, resampling, gaps, errors, and the example log's round trip."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pymc_vcc.measurements import (
+    EXAMPLE_COLUMNS,
+    EXAMPLE_UNITS,
+    example_log_path,
+    load_measurements,
+    unit_converter,
+)
+from pymc_vcc.simulate import VCCSimulator, simulate
+
+LOG_START = 300.0
+"""Truth time of the example log's first row (scripts/make_example_log.py)."""
+NOISE_SI = {"TD": 0.3, "PD": 5e3, "TS": 0.2, "PS": 3e3, "TC": 0.2, "TE": 0.2, "MDOT": 2e-4}
+"""Sensor noise sd of the example log, SI."""
+
+
+@pytest.fixture(scope="module")
+def example():
+    return load_measurements(
+        example_log_path(), EXAMPLE_COLUMNS, EXAMPLE_UNITS, time_column="Timestamp"
+    )
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return simulate(t_end=1200.0)
+
+
+def test_example_log_is_small_and_shipped():
+    assert example_log_path().is_file()
+    assert example_log_path().stat().st_size < 200_000
+
+
+def test_example_log_recovers_the_simulated_outputs_within_the_noise(example, truth):
+    observed = example.observed
+    assert set(observed.data_vars) == set(NOISE_SI)
+    reference = truth.interp(time=observed["time"].values + LOG_START)
+    for name, sd in NOISE_SI.items():
+        assert observed[name].attrs["units"] == truth[name].attrs["units"]
+        residual = observed[name].values - reference[name].values
+        assert abs(residual.mean()) < 0.3 * sd, name
+        assert residual.std() < 1.2 * sd, name
+
+
+def test_example_log_recovers_the_inputs(example, truth):
+    inputs = example.inputs
+    time = inputs["time"].values
+    assert time[0] == 0.0
+    assert np.all(np.diff(time[:-1]) == 10.0)
+    from pymc_vcc.inputs import builtin_inputs, input_segments
+
+    edges, held = input_segments(builtin_inputs())
+    index = np.searchsorted(edges, time[:-1] + LOG_START, side="right") - 1
+    for column, name in enumerate(("valve_opening", "compressor_speed", "T_ambient", "T_indoor")):
+        error = np.abs(inputs[name].values[:-1] - held[index, column])
+        stepped = np.flatnonzero(np.isin(index, index[:-1][np.diff(index) > 0] + 1))
+        settled = np.setdiff1d(np.arange(index.size), stepped)
+        # blocks holding a step average across it; all others equal the truth up to noise
+        tolerance = {"valve_opening": 1e-9, "compressor_speed": 1e-9}.get(name, 0.15)
+        assert error[settled].max() < tolerance, name
+
+
+def test_example_log_reports_the_outage_and_the_sensor_dropout(example):
+    report = example.report
+    assert report.n_rows == 571
+    assert report.outputs == ("TD", "PD", "TS", "PS", "TC", "TE", "MDOT")
+    assert report.missing_values["T_suction_C"] > 0
+    rows = [gap for gap in report.gaps if gap.variable == "rows"]
+    assert len(rows) == 1 and 80.0 < rows[0].duration < 90.0
+    (dropout,) = [gap for gap in report.gaps if gap.variable == "TS"]
+    assert 45.0 < dropout.duration < 55.0
+    assert len(report.segments) == 2
+    assert report.kept == report.segments[0]
+    assert report.dropped_seconds == pytest.approx(1500.0 - report.kept[1], abs=5.0)
+    # the drop-out masks TS (and so the observed time) but does not cut the record
+    assert report.masked_points["TS"] == pytest.approx(dropout.duration, abs=2)
+    assert report.n_observed == example.observed.sizes["time"] == report.n_grid - 48
+    assert "gap in rows" in str(report)
+    held = example.observed["time"].values
+    assert not ((held > dropout.start + 1) & (held < dropout.end - 1)).any()
+
+
+def test_choosing_the_second_segment_restarts_time_at_zero():
+    measured = load_measurements(
+        example_log_path(), EXAMPLE_COLUMNS, EXAMPLE_UNITS, time_column="Timestamp", segment=1
+    )
+    assert measured.report.kept == measured.report.segments[1]
+    assert measured.inputs.attrs["t_offset"] == measured.report.kept[0]
+    assert measured.observed["time"].values[0] == 0.0
+    with pytest.raises(ValueError, match="2 gap-free segment"):
+        load_measurements(
+            example_log_path(), EXAMPLE_COLUMNS, EXAMPLE_UNITS, time_column="Timestamp", segment=2
+        )
+
+
+def test_the_simulator_runs_on_measured_inputs_and_matches_after_start_up(example):
+    outputs = ["PD", "PS", "MDOT"]
+    end = float(example.inputs["time"].values[-1])
+    simulator = VCCSimulator(inputs=example.inputs, outputs=outputs, t_window=(300.0, end))
+    result = simulator({})
+    assert result.attrs["status"] == "ok"
+    observed = example.observed.sel(time=slice(300.0, None))
+    simulated = result.sel(time=observed["time"].values)
+    for name in outputs:
+        relative = np.abs(simulated[name].values / observed[name].values - 1.0)
+        assert np.median(relative) < 0.015, name
+
+
+@pytest.mark.parametrize(
+    ("unit", "quantity", "value", "si"),
+    [
+        ("degC", "temperature", 25.0, 298.15),
+        ("°C", "temperature", 0.0, 273.15),
+        ("degF", "temperature", 212.0, 373.15),
+        ("K", "temperature", 300.0, 300.0),
+        ("bar", "pressure", 10.0, 1e6),
+        ("barg", "pressure", 10.0, 1e6 + 101325.0),
+        ("bar(g)", "pressure", 0.0, 101325.0),
+        ("bara", "pressure", 1.0, 1e5),
+        ("kPa", "pressure", 500.0, 5e5),
+        ("psig", "pressure", 0.0, 101325.0),
+        ("MPa", "pressure", 2.5, 2.5e6),
+        ("g/s", "mass_flow", 20.0, 0.02),
+        ("kg/h", "mass_flow", 72.0, 0.02),
+        ("%", "fraction", 40.0, 0.4),
+        ("1", "fraction", 0.4, 0.4),
+        ("rpm", "speed", 3000.0, 50.0),
+        ("Hz", "speed", 50.0, 50.0),
+    ],
+)
+def test_unit_conversion(unit, quantity, value, si):
+    assert unit_converter(unit, quantity)(np.array([value]))[0] == pytest.approx(si)
+
+
+def test_gauge_pressure_uses_the_given_atmosphere():
+    assert unit_converter("barg", "pressure", 95000.0)(np.array([1.0]))[0] == 195000.0
+
+
+def test_unknown_unit_names_the_allowed_ones():
+    with pytest.raises(ValueError, match=r"unknown pressure unit 'atm'.*barg"):
+        unit_converter("atm", "pressure")
+
+
+# ----------------------------------------------------------------- small hand-made logs
+
+HEADER = "t [s],valve [%],speed [rpm],Tamb [degC],Tin [degC],PD [bar],TD [degC]"
+COLUMNS = {
+    "valve": "valve_opening",
+    "speed": "compressor_speed",
+    "Tamb": "T_ambient",
+    "Tin": "T_indoor",
+    "PD": "PD",
+    "TD": "TD",
+}
+
+
+def _write(path: Path, rows: list[str], header: str = HEADER) -> Path:
+    path.write_text("\n".join([header, *rows]) + "\n")
+    return path
+
+
+def _rows(times, pd="27.0", td="70.0", valve="40") -> list[str]:
+    return [f"{t},{valve},3000,35.0,27.0,{pd},{td}" for t in times]
+
+
+def test_header_units_seconds_and_interpolation(tmp_path):
+    rows = [f"{t},40,3000,35.0,27.0,{27.0 + 0.1 * t},70.0" for t in (0.0, 2.5, 5.0, 7.5, 10.0)]
+    measured = load_measurements(
+        _write(tmp_path / "log.csv", rows), COLUMNS, time_column="t", input_hold=5.0
+    )
+    np.testing.assert_allclose(measured.observed["time"], np.arange(11.0))
+    np.testing.assert_allclose(measured.observed["PD"], (27.0 + 0.1 * np.arange(11.0)) * 1e5)
+    assert measured.observed["PD"].attrs["units"] == "Pa"
+    np.testing.assert_allclose(measured.inputs["time"], [0.0, 5.0, 10.0])
+    np.testing.assert_allclose(measured.inputs["compressor_speed"], 50.0)
+    np.testing.assert_allclose(measured.inputs["valve_opening"], 0.4)
+    np.testing.assert_allclose(measured.inputs["T_ambient"], 308.15)
+
+
+def test_time_in_minutes_and_semicolons(tmp_path):
+    path = tmp_path / "log.csv"
+    path.write_text(
+        HEADER.replace(",", ";") + "\n" + "\n".join(r.replace(",", ";") for r in _rows([0, 1, 2]))
+    )
+    measured = load_measurements(path, COLUMNS, time_column="t", time_unit="min", max_gap=90.0)
+    assert measured.observed["time"].values[-1] == 120.0
+
+
+def test_output_gap_masks_and_input_gap_cuts(tmp_path):
+    times = np.arange(0.0, 200.0, 2.0)
+    rows = [
+        f"{t},{'' if 100 < t < 150 else 40},3000,35,27,{'' if 20 < t < 70 else 27},70"
+        for t in times
+    ]
+    measured = load_measurements(
+        _write(tmp_path / "log.csv", rows), COLUMNS, time_column="t", max_gap=10.0
+    )
+    report = measured.report
+    assert [(g.variable, g.start, g.end) for g in report.gaps] == [
+        ("PD", 20.0, 70.0),
+        ("valve_opening", 100.0, 150.0),
+    ]
+    assert report.segments == ((0.0, 100.0), (150.0, 198.0))
+    assert report.kept == (0.0, 100.0)
+    assert report.masked_points == {"PD": 49, "TD": 0}
+    observed_time = measured.observed["time"].values
+    assert observed_time.size == 101 - 49
+    assert not ((observed_time > 20) & (observed_time < 70)).any()
+
+
+def test_short_gaps_are_bridged(tmp_path):
+    rows = _rows([0, 5, 25, 30])
+    measured = load_measurements(_write(tmp_path / "log.csv", rows), COLUMNS, time_column="t")
+    assert measured.report.gaps == ()
+    assert measured.observed.sizes["time"] == 31
+
+
+def test_iso_timestamps_with_zone(tmp_path):
+    stamps = ["2024-07-15T13:05:00+02:00", "2024-07-15T13:05:03.5+02:00", "2024-07-15T11:05:07Z"]
+    rows = [f"{s},40,3000,35,27,27,70" for s in stamps]
+    measured = load_measurements(_write(tmp_path / "log.csv", rows), COLUMNS, time_column="t")
+    assert measured.observed["time"].values[-1] == 7.0
+    assert measured.report.time_origin == stamps[0]
+
+
+@pytest.mark.parametrize(
+    ("rows", "columns", "units", "match"),
+    [
+        (_rows([0, 1, 2]), {**COLUMNS, "PE": "PE"}, {}, r"column 'PE' not found"),
+        (_rows([0, 1, 2]), {**COLUMNS, "PD": "XX"}, {}, r"unknown id\(s\) \['XX'\]"),
+        (_rows([0, 1, 2]), {k: v for k, v in COLUMNS.items() if k != "Tin"}, {}, "T_indoor"),
+        (
+            _rows([0, 1, 2]),
+            {
+                "valve": "valve_opening",
+                "speed": "compressor_speed",
+                "Tamb": "T_ambient",
+                "Tin": "T_indoor",
+            },
+            {},
+            "at least one output",
+        ),
+        (_rows([0, 1, 2]), COLUMNS, {"PD": "atm"}, r"'PD' \(PD\): unknown pressure unit 'atm'"),
+        (_rows([0, 2, 1]), COLUMNS, {}, "strictly increasing; line 4"),
+        (_rows([0, 1, 1]), COLUMNS, {}, "strictly increasing"),
+        (_rows([0, 1, 2], td=""), COLUMNS, {}, r"column 'TD' \(TD\) has no values"),
+        (_rows([0, 1, 2], pd="high"), COLUMNS, {}, r"column 'PD \[bar\]', line 2: 'high'"),
+        (_rows([0, 1, 2], valve="0"), COLUMNS, {}, "valve_opening = 0.0 1 .* outside"),
+        (["yesterday,40,3000,35,27,27,70", *_rows([1, 2])], COLUMNS, {}, "neither a number"),
+        (_rows([0]), COLUMNS, {}, "at least two data rows"),
+    ],
+)
+def test_bad_files_give_clear_errors(tmp_path, rows, columns, units, match):
+    path = _write(tmp_path / "bad.csv", rows)
+    with pytest.raises(ValueError, match=match):
+        load_measurements(path, columns, units, time_column="t")
+
+
+def test_columns_without_any_unit_are_refused(tmp_path):
+    path = _write(tmp_path / "log.csv", _rows([0, 1, 2]), header=HEADER.replace(" [bar]", ""))
+    with pytest.raises(ValueError, match=r"no unit for column 'PD'.*'barg'"):
+        load_measurements(path, COLUMNS, time_column="t")
+    measured = load_measurements(path, COLUMNS, {"PD": "barg"}, time_column="t")
+    assert measured.observed["PD"].values[0] == pytest.approx(27e5 + 101325.0)
+
+
+def test_missing_file_and_bad_settings(tmp_path):
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_measurements(tmp_path / "none.csv", COLUMNS)
+    path = _write(tmp_path / "log.csv", _rows([0, 1, 2]))
+    with pytest.raises(ValueError, match="dt must be a positive"):
+        load_measurements(path, COLUMNS, time_column="t", dt=0.0)
+    with pytest.raises(ValueError, match=r"max_gap = 0\.5 s must be at least dt"):
+        load_measurements(path, COLUMNS, time_column="t", max_gap=0.5)
+    with pytest.raises(ValueError, match="unknown time_unit 'days'"):
+        load_measurements(path, COLUMNS, time_column="t", time_unit="days")
