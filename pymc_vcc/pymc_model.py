@@ -219,7 +219,7 @@ def gmm_prior_variable(name: str, prior: GMMPrior, **kwargs) -> TensorVariable:
     """A vector PyMC variable distributed as ``prior`` (in its ``names`` order).
 
     Its log-density equals :meth:`GMMPrior.logpdf`; it is sampled in the logit space of the
-    bounds (PyMC's interval transform), where the mixture is Gaussian. Must be called inside a
+    bounds (the :class:`LogitBox` transform), where the mixture is Gaussian. Must be called inside a
     model context; ``kwargs`` go to ``pm.CustomDist`` (e.g. ``dims``).
     """
     if not isinstance(prior, GMMPrior):
@@ -405,7 +405,7 @@ def add_simulator(
         distance=DistanceKernel(distance),
         sum_stat="identity",
         epsilon=float(epsilon),
-        ndims_params=[1] * len(params),
+        signature="(p)->()" if len(params) == 1 else "(p),(q)->()",
         observed=data.values,
         dims=(f"{name}_output", f"{name}_time"),
     )
