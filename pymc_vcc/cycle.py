@@ -230,7 +230,7 @@ def build_constants(unit: Unit, theta: np.ndarray, controller: bool | None = Non
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def cell_properties(y, tables, props):
     """Fill ``props`` (shape (5, 2N + 3): T, ρ, ∂ρ/∂p, ∂ρ/∂h, quality) for every cell: columns
     0..N of the high-side zone, then N + 1 columns of the low-side zone. Returns False if a
@@ -241,7 +241,7 @@ def cell_properties(y, tables, props):
     return bool(np.isfinite(props[1]).all())
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _cell_row(y, n, i, tables, props):
     """Properties of cell ``i`` (numbered as in :func:`cell_properties`)."""
     if i <= n:
@@ -259,7 +259,7 @@ def _cell_row(y, n, i, tables, props):
     props[4, i] = x
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def evaluate(y, u, c, tables, dydt, out):
     """Right-hand side and outputs at state ``y`` under inputs ``u``.
 
@@ -273,7 +273,7 @@ def evaluate(y, u, c, tables, dydt, out):
     return balances(y, u, c, tables, props, dydt, out)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def balances(y, u, c, tables, props, dydt, out):
     """:func:`evaluate` given the cell properties ``props`` of :func:`cell_properties`."""
     n = (y.size - 6) // 4
@@ -441,7 +441,7 @@ def balances(y, u, c, tables, props, dydt, out):
     return bool(np.isfinite(dydt).all())
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rhs(y, u, c, tables):
     """dy/dt (NaN-filled when a property left the tables)."""
     dydt = np.empty(y.size)
@@ -450,7 +450,7 @@ def rhs(y, u, c, tables):
     return dydt
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jacobian(y, u, c, tables, f0):
     """Dense forward-difference Jacobian ∂f/∂y at ``y`` (``f0`` = f(y)), computed in Numba.
 
@@ -493,7 +493,7 @@ def jacobian(y, u, c, tables, f0):
     return jac
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def outputs_along(ys, us, c, tables):
     """Outputs and diagnostics (columns of :data:`N_EVAL`) at each row of states ``ys`` with the
     matching inputs ``us``."""
@@ -507,7 +507,7 @@ def outputs_along(ys, us, c, tables):
     return result
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def total_mass(y, c, tables):
     """Total refrigerant mass M(y), kg (NaN if a property left the tables)."""
     n = (y.size - 6) // 4
@@ -522,13 +522,13 @@ def total_mass(y, c, tables):
     return mass
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _quality_enthalpy(tables, p, x):
     sat = saturation_state(tables, p)
     return sat[1] + x * (sat[2] - sat[1])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def filled_state(s, p_c, p_e, n, tables):
     """A running-cycle state at pressures p_c, p_e whose charge grows monotonically with the fill
     level ``s`` in [-1, 2]: s < 0 leaves the condenser outlet and liquid line two-phase (up to

@@ -48,6 +48,10 @@ def _builtin_unit() -> Unit:
     return load_unit()
 
 
+class _WallClockLimit(Exception):
+    """Raised from inside a solver step when the run exceeds its wall-clock limit."""
+
+
 _THREADPOOLS = ThreadpoolController()
 """BLAS runs single-threaded inside a simulation: its small LU factorisations only lose by
 threading (five times slower at 126 states on a busy 2-core machine), and samplers run one
@@ -140,7 +144,7 @@ def simulate(
     reason = ""
     try:
         y = initial_state(c, n, held[0][2], held[0][3], tables)
-    except ValueError as error:
+    except Exception as error:  # any numerical trouble is a failed run, never an exception
         y = None
         reason = f"initial state: {error}"
     if y is not None:
@@ -201,6 +205,8 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
             stats["n_rhs"] += 1
             if not evaluate(state, u, c, tables, dydt, out):
                 stats["bad_rhs"] += 1
+            if time.perf_counter() - started > limit:  # also stops a step that never ends
+                raise _WallClockLimit
             return dydt.copy()
 
         def jac(t, state, u=u):
@@ -215,6 +221,8 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
         if pending.size and times[pending[0]] == t0:
             states[pending[0]] = y
             pending = pending[1:]
+        if not evaluate(y, u, c, tables, dydt, out):
+            return f"right-hand side not finite at t = {t0:.1f} s (property out of range)"
         try:
             solver = Radau(
                 fun,
@@ -226,14 +234,16 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
                 jac=jac,
                 max_step=solver_settings.max_step,
             )
-        except ValueError as error:
+        except Exception as error:
             return f"solver start at t = {t0:.1f} s: {error}"
         _use_direct_lapack(solver)
         while solver.status == "running":
             try:
                 message = solver.step()
-            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
-                return f"solver failure at t = {solver.t:.2f} s: {error}"
+            except _WallClockLimit:
+                return f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s"
+            except Exception as error:
+                return f"solver failure at t = {solver.t:.2f} s: {type(error).__name__}: {error}"
             stats["n_steps"] += 1
             if solver.status == "failed":
                 why = message or "Radau failed"

@@ -122,6 +122,8 @@ def test_failures_are_flagged_not_raised(unit):
     too_much = simulate(unit, {"M0": 9.0}, inputs)
     assert too_much.attrs["status"] == "failed"
     assert "initial state" in too_much.attrs["failure_reason"]
+    degenerate = simulate(unit, {"CF_VOL": 0.0, "L_COND": 0.0}, inputs)  # zero flow, no volume
+    assert degenerate.attrs["status"] == "failed" and degenerate.attrs["failure_reason"]
     with pytest.raises(ValueError, match="unknown parameter id"):
         simulate(unit, {"charge": 1.0}, inputs)
 

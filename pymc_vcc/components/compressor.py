@@ -13,7 +13,7 @@ from pymc_vcc.components.smooth import smooth_max, smooth_min, smooth_pos, smoot
 from pymc_vcc.refrigerant import entropy, h_from_ps, h_from_pT, state
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def volumetric_efficiency(
     pressure_ratio: float, clearance: float, exponent: float, cf_vol: float
 ) -> float:
@@ -22,7 +22,7 @@ def volumetric_efficiency(
     return cf_vol * smooth_max(nominal, 0.02, 0.01)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def compressor_mass_flow(
     rho_suction: float, speed: float, displacement: float, eta_vol: float
 ) -> float:
@@ -30,7 +30,7 @@ def compressor_mass_flow(
     return eta_vol * rho_suction * displacement * speed
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def shaft_power(
     mass_flow: float, dh_isentropic: float, isentropic_efficiency: float, cf_pow: float
 ) -> float:
@@ -38,20 +38,20 @@ def shaft_power(
     return cf_pow * mass_flow * smooth_pos(dh_isentropic, 100.0) / isentropic_efficiency
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def shell_loss(ua: float, cf_shell: float, T_shell: float, T_ambient: float) -> float:
     """Heat lost through the shell to the ambient, W: cf UA (T_shell - T_amb)."""
     return cf_shell * ua * (T_shell - T_ambient)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def protection_speed_factor(pressure: float, p_start: float, p_stop: float) -> float:
     """High-pressure protection of inverter units: the drive lowers the speed smoothly from
     100 % at ``p_start`` to 5 % at ``p_stop`` (Pa) of high-side pressure."""
     return 1.0 - 0.95 * smooth_step((pressure - p_start) / (p_stop - p_start))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def compressor(
     tables,
     p_suction: float,

@@ -18,7 +18,7 @@ QUALITY_BAND = 0.04
 """Half-width of the fillet in quality on either side of the bubble (x = 0) and dew (x = 1)."""
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fillet(tables, p: float, h: float, centre: float, band: float) -> tuple[float, float]:
     sat = saturation_state(tables, p)
     latent = sat[2] - sat[1]
@@ -46,7 +46,7 @@ def _fillet(tables, p: float, h: float, centre: float, band: float) -> tuple[flo
     return rho, drho_dh
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _band_centre(x: float, band: float) -> float:
     if abs(x) < band:
         return 0.0
@@ -55,7 +55,7 @@ def _band_centre(x: float, band: float) -> float:
     return -1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def cell_state(tables, p: float, h: float) -> tuple[float, float, float, float, float]:
     """(T K, ρ kg/m³, ∂ρ/∂p s²/m², ∂ρ/∂h kg² s²/m⁵... i.e. (kg/m³)/(J/kg), unclipped quality)
     like ``refrigerant.state`` but with the C¹ density near the saturation lines."""

@@ -9,7 +9,7 @@ from numba import njit
 from pymc_vcc.components.smooth import signed_sqrt
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def valve_mass_flow(
     opening: float,
     flow_area: float,

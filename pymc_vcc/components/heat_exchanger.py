@@ -22,7 +22,7 @@ from numba import njit
 from pymc_vcc.components.smooth import upwind_weight
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sweep(volume, rho, drho_dp, drho_dh, h, source, inflow, dp_guess, flow_eps):
     n = h.size
     a_flow = inflow
@@ -45,7 +45,7 @@ def _sweep(volume, rho, drho_dp, drho_dh, h, source, inflow, dp_guess, flow_eps)
     return alpha, beta, a_flow, b_flow
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def zone_derivatives(
     volume: np.ndarray,
     rho: np.ndarray,

@@ -16,7 +16,7 @@ VAPOR_BLEND = (0.9, 1.05)
 """Quality range of dry-out, from the two-phase to the vapour value."""
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def refrigerant_htc(
     quality: float,
     htc_liquid: float,
@@ -42,7 +42,7 @@ def refrigerant_htc(
     return nominal * ratio**0.8
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def air_side_heat(
     capacity_rate: float, T_air_in: float, T_wall: float, htc: float, area: float
 ) -> float:
@@ -51,7 +51,7 @@ def air_side_heat(
     return capacity_rate * (T_air_in - T_wall) * (1.0 - math.exp(-htc * area / capacity_rate))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def wall_heat(htc: float, area: float, T_wall: float, T_fluid: float) -> float:
     """Convective heat from a wall to a fluid, W."""
     return htc * area * (T_wall - T_fluid)

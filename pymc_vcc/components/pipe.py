@@ -7,13 +7,13 @@ import math
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pipe_volume(length: float, inner_diameter: float, n_paths: float = 1.0) -> float:
     """Internal volume of ``n_paths`` parallel tubes, m³."""
     return n_paths * length * 0.25 * math.pi * inner_diameter * inner_diameter
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def friction_coefficient(
     friction_factor: float, length: float, inner_diameter: float, n_paths: float = 1.0
 ) -> float:
@@ -23,7 +23,7 @@ def friction_coefficient(
     return friction_factor * length / inner_diameter / (2.0 * area * area)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pressure_drop(coefficient: float, mass_flow: float, density: float, eps: float) -> float:
     """Friction pressure drop in the flow direction, Pa: K ṁ sqrt(ṁ² + eps²) / ρ (regularised
     ṁ|ṁ| so the slope at zero flow is finite)."""

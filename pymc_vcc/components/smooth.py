@@ -7,37 +7,37 @@ import math
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def smooth_pos(x: float, eps: float) -> float:
     """A smooth max(x, 0): 0.5 (x + sqrt(x² + eps²)); exact to eps²/(4|x|) away from 0."""
     return 0.5 * (x + math.sqrt(x * x + eps * eps))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def smooth_max(a: float, b: float, eps: float) -> float:
     """A smooth max(a, b) with transition width ``eps``; always >= max(a, b)."""
     return b + smooth_pos(a - b, eps)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def smooth_min(a: float, b: float, eps: float) -> float:
     """A smooth min(a, b) with transition width ``eps``; always <= min(a, b)."""
     return a - smooth_pos(a - b, eps)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def upwind_weight(flow: float, eps: float) -> float:
     """Smooth indicator of forward flow: 0.5 (1 + flow / sqrt(flow² + eps²)), in [0, 1]."""
     return 0.5 * (1.0 + flow / math.sqrt(flow * flow + eps * eps))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def signed_sqrt(x: float, eps: float) -> float:
     """sign(x) sqrt(|x|) with a finite slope at 0: x / (x² + eps²)^(1/4)."""
     return x / (x * x + eps * eps) ** 0.25
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def smooth_step(t: float) -> float:
     """C¹ step from 0 (t <= 0) to 1 (t >= 1): 3t² - 2t³ in between."""
     if t <= 0.0:
