@@ -234,8 +234,10 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
                 jac=jac,
                 max_step=solver_settings.max_step,
             )
+        except _WallClockLimit:
+            return f"wall-clock limit of {limit:.1f} s reached at t = {t0:.1f} s"
         except Exception as error:
-            return f"solver start at t = {t0:.1f} s: {error}"
+            return f"solver start at t = {t0:.1f} s: {type(error).__name__}: {error}"
         _use_direct_lapack(solver)
         while solver.status == "running":
             try:
