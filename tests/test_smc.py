@@ -75,10 +75,14 @@ def test_results_do_not_depend_on_the_executor():
     with pm.Model():
         add_simulator("y", sim, observed, epsilon=0.5, distance=sim.distance)
         serial = sample_smc_abc(draws=100, executor="serial", random_seed=5, **QUIET)
-        with make_executor("processes", n_workers=2) as executor:
-            parallel = sample_smc_abc(draws=100, executor=executor, random_seed=5, **QUIET)
-    np.testing.assert_array_equal(serial.posterior["mu"].values, parallel.posterior["mu"].values)
-    assert "ProcessExecutor" in parallel.sample_stats.attrs["executor"]
+        runs = {}
+        for kind in ("processes", "dask"):
+            with make_executor(kind, n_workers=2) as executor:
+                runs[kind] = sample_smc_abc(draws=100, executor=executor, random_seed=5, **QUIET)
+    for kind, name in (("processes", "ProcessExecutor"), ("dask", "DaskExecutor")):
+        parallel = runs[kind]
+        np.testing.assert_array_equal(serial.posterior["mu"].values, parallel.posterior["mu"])
+        assert name in parallel.sample_stats.attrs["executor"]
 
 
 def test_gaussian_location_matches_the_exact_abc_posterior():
