@@ -145,6 +145,14 @@ def test_simulator_interface_for_samplers(unit):
         VCCSimulator(unit, t_window=(100.0, 5000.0))
 
 
+@pytest.mark.parametrize("charge", [0.9, 2.2])
+def test_whole_charge_range_simulates(unit, charge):
+    run = simulate(unit, {"M0": charge}, t_end=1060.0, diagnostics=True)
+    assert run.attrs["status"] == "ok", run.attrs["failure_reason"]
+    assert run.attrs["mass_error"] < 1e-4
+    assert run.PC.values.max() < 47e5  # the flooded condenser stays below the critical point
+
+
 @pytest.mark.slow
 def test_robust_over_the_table_iii_box(unit):
     """A small version of the benchmark's 200 draws: >= 95 % must simulate 1060 s."""
