@@ -114,3 +114,25 @@ def test_smc_posterior_predicts_a_longer_profile():
     assert tree["posterior_predictive"]["y"].shape == (1, 100, 200)
     median = tree["predictive_bands"]["y"].sel(band="median").values
     assert abs(median.mean() - idata.posterior["mu"].mean().item()) < 0.05
+
+
+def test_vcc_predictive_keeps_time_and_units_of_the_simulator():
+    from pymc_vcc.simulate import VCCSimulator
+
+    sim = VCCSimulator(t_window=(20.0, 300.0), outputs=["PD", "TS", "MDOT"])
+    truth = sim({"M0": 1.5})
+    rng = np.random.default_rng(0)
+    tree = sample_posterior_predictive(
+        posterior_tree({"M0": rng.normal(1.5, 0.02, (1, 6))}),
+        sim,
+        reference=truth,
+        executor="processes",
+        n_workers=2,
+        seed=1,
+    )
+    predictive = tree["posterior_predictive"].to_dataset()
+    np.testing.assert_array_equal(predictive["time"].values, truth["time"].values)
+    for name in ("PD", "TS", "MDOT"):
+        assert predictive[name].attrs["units"] == truth[name].attrs["units"]
+    median = tree["predictive_bands"]["PD"].sel(band="median").values
+    np.testing.assert_allclose(median, truth["PD"].values, rtol=0.02)
