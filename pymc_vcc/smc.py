@@ -333,7 +333,7 @@ class ParallelIMH(IMH):
 
 
 def sample_smc_abc(
-    draws: int = 1000,
+    draws: int = 500,
     *,
     executor: Executor | ExecutorKind = "processes",
     n_workers: int | None = None,
@@ -348,7 +348,9 @@ def sample_smc_abc(
     """SMC-ABC of the current model with :class:`ParallelIMH` and defaults for costly simulators.
 
     Args:
-        draws: particles per stage (and posterior draws per chain).
+        draws: particles per stage (and posterior draws per chain). A run costs about
+            draws × (1 + mutation steps over all stages) simulations, typically 10–25 × draws
+            (PyMC's default of 2000 is sized for cheap likelihoods).
         executor: an open executor (left open), or a kind (``"serial"``, ``"processes"``,
             ``"dask"`` for a new local cluster) opened for this call and closed after.
         n_workers: workers of an executor opened here (default: every core).
