@@ -349,7 +349,7 @@ def sample_smc_abc(
 
     Args:
         draws: particles per stage (and posterior draws per chain). A run costs about
-            draws × (1 + mutation steps over all stages) simulations, typically 10–25 × draws
+            draws × (1 + mutation steps over all stages) simulations, typically 10–40 × draws
             (PyMC's default of 2000 is sized for cheap likelihoods).
         executor: an open executor (left open), or a kind (``"serial"``, ``"processes"``,
             ``"dask"`` for a new local cluster) opened for this call and closed after.
