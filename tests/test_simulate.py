@@ -155,12 +155,12 @@ def test_whole_charge_range_simulates(unit, charge):
 
 @pytest.mark.slow
 def test_robust_over_the_table_iii_box(unit):
-    """A small version of the benchmark's 200 draws: >= 95 % must simulate 1060 s."""
+    """200 uniform draws from the Table III box: >= 95 % must simulate the 1060 s window."""
     simulator = VCCSimulator(unit, t_window=(0.0, 1060.0))
-    draws = unit.parameters.sample_uniform(24, np.random.default_rng(2024))
+    draws = unit.parameters.sample_uniform(200, np.random.default_rng(2024))
     failures = []
     for theta in draws:
         result = simulator(theta, None)
         if result.attrs["status"] != "ok":
             failures.append((theta, result.attrs["failure_reason"]))
-    assert len(failures) <= 1, failures
+    assert len(failures) <= 10, failures
