@@ -442,15 +442,6 @@ def balances(y, u, c, tables, props, dydt, out):
 
 
 @njit(cache=True, error_model="numpy")
-def rhs(y, u, c, tables):
-    """dy/dt (NaN-filled when a property left the tables)."""
-    dydt = np.empty(y.size)
-    out = np.empty(N_EVAL)
-    evaluate(y, u, c, tables, dydt, out)
-    return dydt
-
-
-@njit(cache=True, error_model="numpy")
 def jacobian(y, u, c, tables, f0):
     """Dense forward-difference Jacobian ∂f/∂y at ``y`` (``f0`` = f(y)), computed in Numba.
 

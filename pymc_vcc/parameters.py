@@ -8,7 +8,7 @@ supplied parameter mappings into validated vectors.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,7 +106,7 @@ class ParameterTable:
                 return spec
         raise KeyError(f"unknown parameter id {pid!r}; allowed ids are {list(PARAMETER_IDS)}")
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[ParameterSpec]:
         return iter(self.specs)
 
     def __len__(self) -> int:
@@ -132,7 +132,9 @@ class ParameterTable:
         """Nominal values in Table III order."""
         return np.array([spec.nominal for spec in self.specs])
 
-    def vector(self, theta: Mapping[str, float] | None = None, *, check_bounds: bool = False):
+    def vector(
+        self, theta: Mapping[str, float] | None = None, *, check_bounds: bool = False
+    ) -> np.ndarray:
         """Full parameter vector: nominal values overridden by ``theta`` (id -> value).
 
         Unknown ids and non-finite values raise ``ValueError``; with ``check_bounds`` values
