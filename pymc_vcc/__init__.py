@@ -1,8 +1,54 @@
 """pymc_vcc: Bayesian, likelihood-free calibration of dynamic vapor-compression-cycle models.
 
-The public API is re-exported here; see the README for a tour.
+The public API is re-exported here and imported lazily on first use, so that worker processes
+which only simulate never pay for importing PyMC. See the README for a tour.
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__"]
+_EXPORTS: dict[str, tuple[str, ...]] = {
+    "pymc_vcc.refrigerant": ("load_refrigerant", "Refrigerant", "SUPPORTED_FLUIDS"),
+    "pymc_vcc.unit": ("load_unit", "Unit"),
+    "pymc_vcc.parameters": ("PARAMETER_IDS", "ParameterSpec", "ParameterTable"),
+    "pymc_vcc.inputs": (
+        "INPUT_IDS",
+        "builtin_inputs",
+        "constant_inputs",
+        "load_inputs_csv",
+        "make_inputs",
+    ),
+    "pymc_vcc.cycle": ("OUTPUT_IDS",),
+    "pymc_vcc.simulate": ("simulate", "VCCSimulator", "operating_point"),
+    "pymc_vcc.measurements": ("load_measurements", "Measurements", "example_log_path"),
+    "pymc_vcc.distances": ("ks_distance", "ks_distances"),
+    "pymc_vcc.priors": ("Prior", "UniformPrior", "GMMPrior", "load_prior"),
+    "pymc_vcc.abc": ("abc_rejection", "TooManyFailuresError"),
+    "pymc_vcc.sequential": ("sequential_calibration", "SequentialResult"),
+    "pymc_vcc.executors": ("make_executor", "Executor"),
+    "pymc_vcc.pymc_model": ("add_simulator", "gmm_prior_variable"),
+    "pymc_vcc.smc": ("sample_smc_abc", "ParallelIMH"),
+    "pymc_vcc.predictive": ("sample_posterior_predictive",),
+    "pymc_vcc.sensitivity": ("sobol_indices",),
+    "pymc_vcc.studies": ("StudySettings", "leak_study", "estimation_study", "sobol_study"),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+
+__all__ = ["__version__", *sorted(_MODULE_OF)]
+
+
+def __getattr__(name: str) -> Any:
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module 'pymc_vcc' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__
