@@ -102,6 +102,30 @@ def _speed(quick: bool, busy: bool) -> dict[str, float | int]:
     return results
 
 
+def _busy(seconds: float) -> float:
+    end = time.thread_time() + seconds
+    while time.thread_time() < end:
+        pass
+    return seconds
+
+
+def _machine_capacity() -> float:
+    """Cores the workers actually got: 2 CPU-bound tasks serially vs on the 2 workers.
+
+    2.0 on an idle 2-core machine; lower when other programs load it (the CPU-bound speed-up
+    cannot exceed it).
+    """
+    with make_executor("processes", n_workers=N_WORKERS) as executor:
+        executor.map(_busy, [0.01] * N_WORKERS)  # start the workers
+        start = time.perf_counter()
+        executor.map(_busy, [0.5] * N_WORKERS, chunksize=1)
+        parallel = time.perf_counter() - start
+    start = time.perf_counter()
+    for _ in range(N_WORKERS):
+        _busy(0.5)
+    return (time.perf_counter() - start) / parallel
+
+
 def _problems(quick: bool):
     """(name, simulator, truth, exact mean, exact sd) of each test problem."""
     cases = [("gaussian_location", GaussianLocation(), {"mu": 0.5})]
@@ -205,6 +229,7 @@ def run(quick: bool) -> dict[str, float | int | str]:
             "smc_speed_simulation_seconds": SIMULATION_SECONDS,
             "smc_speed_draws": 40 if quick else 100,
             "smc_speed_workers": N_WORKERS,
+            "smc_machine_parallel_capacity": _machine_capacity(),
         }
         return {
             **settings,
