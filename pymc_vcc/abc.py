@@ -30,8 +30,8 @@ import xarray as xr
 
 from pymc_vcc import __version__
 from pymc_vcc.distances import BatchDistance, ks_distances
-from pymc_vcc.executors import Executor, ExecutorKind, executor_scope
-from pymc_vcc.outcomes import FAILURE_KINDS, OK, run_simulation
+from pymc_vcc.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
+from pymc_vcc.outcomes import FAILURE_KINDS, OK, crash_outcome, run_simulation
 from pymc_vcc.priors import Prior, UniformPrior
 from pymc_vcc.progress import PhaseProgress, progress_enabled
 from pymc_vcc.series import ObservedData, OutputData, Simulator, prepare_observed
@@ -74,7 +74,9 @@ class SimulationTask:
     """Worker side of the sampler: simulate a chunk of draws, add noise, compute distances.
 
     Called with a list of ``(phase, index, theta_row)``; returns one
-    :class:`~pymc_vcc.store.SimulationRecord` per item.
+    :class:`~pymc_vcc.store.SimulationRecord` per item. A simulation that kills its worker
+    process comes back from the executor as a :class:`~pymc_vcc.executors.WorkerCrash`, which
+    :func:`_run_phase` records as a ``worker-crash`` failure.
     """
 
     simulator: Simulator
@@ -310,6 +312,11 @@ def _check_failures(records: _PhaseRecords, phase: int, size: int, max_rate: flo
         )
 
 
+def _crash_record(phase: int, index: int, crash: WorkerCrash) -> SimulationRecord:
+    outcome = crash_outcome(crash)
+    return SimulationRecord(phase, index, np.nan, outcome.status, outcome.reason, outcome.elapsed)
+
+
 def _run_phase(
     executor: Executor,
     task: SimulationTask,
@@ -326,11 +333,17 @@ def _run_phase(
     if scan is not None and scan.advance():
         return
     bar.start_phase(f"{PHASE_NAMES[phase]:5s}", size, records.n_done)
-    items = ((phase, index, thetas[index]) for index in range(size) if not records.done[index])
+    todo = np.flatnonzero(~records.done)
+    items = ((phase, int(index), thetas[index]) for index in todo)
     chunks = executor.imap_chunks(task, items, batched=True)
     try:
         for chunk in chunks:
-            finished = [record for _, record in chunk]
+            finished = [
+                _crash_record(phase, int(todo[position]), result)
+                if isinstance(result, WorkerCrash)
+                else result
+                for position, result in chunk
+            ]
             if store is not None:
                 store.append(finished)
             for record in finished:

@@ -16,6 +16,19 @@ come with the items (e.g. a seed per item), never from worker state.
 Worker processes start with ``forkserver`` (safe in programs that run threads, as PyMC, Dask and
 BLAS do): a script using the ``"processes"`` executor needs the usual
 ``if __name__ == "__main__":`` guard around its main code, as any multiprocessing script does.
+
+Worker crashes. A worker process that dies while running a chunk (a segfault in compiled code,
+``os._exit``, the out-of-memory killer) never stops the stream: the chunk's items run again, one
+item per chunk, and an item whose lone run kills its worker too is the culprit: it comes back as
+a :class:`WorkerCrash` instead of a result (``map`` puts it at the item's position). Nothing
+already finished is lost. The local-process backend gives each worker its own pipe, so a death is
+pinned on the chunk that worker was running, a new worker takes its place at once and the other
+workers go on undisturbed. On Dask the scheduler retries a task whose worker died and gives up
+after ``distributed.scheduler.allowed-failures`` more deaths (``KilledWorker``); it counts a
+death against every task queued on that worker, so the items of a chunk that gave up are rerun
+one at a time with nothing else in flight, and one that gives up alone is the culprit. Dask
+workers started without a nanny are not restarted: once all have died, the run waits for new
+ones. The serial backend runs items in the calling process: a crash there ends the caller.
 """
 
 from __future__ import annotations
@@ -24,12 +37,21 @@ import hashlib
 import logging
 import multiprocessing
 import os
+import signal
 import time
+import traceback
 from abc import ABC, abstractmethod
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent import futures
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass, field
 from itertools import islice
+from multiprocessing import connection as mp_connection
+from multiprocessing import util as mp_util
+from multiprocessing.connection import Connection
+from multiprocessing.context import BaseContext
+from multiprocessing.process import BaseProcess
 from typing import Any, ClassVar, Literal
 
 import cloudpickle
@@ -39,6 +61,39 @@ EXECUTOR_KINDS: tuple[str, ...] = ("serial", "processes", "dask")
 
 _FUNCTION_CACHE: dict[str, Callable[..., Any]] = {}
 _FUNCTION_CACHE_SIZE = 4
+_STOP_SECONDS = 5.0
+
+
+@dataclass(frozen=True, slots=True)
+class WorkerCrash:
+    """Stands in for the result of an item whose run killed the worker process running it.
+
+    Attributes:
+        reason: what happened, e.g. ``"worker process died (exit code -11 / signal SIGSEGV)"``.
+        elapsed: wall time from the start of the item's lone run to the death, s (0 if unknown).
+    """
+
+    reason: str
+    elapsed: float = 0.0
+
+
+class _WorkerDiedError(Exception):
+    """Set on the future of a chunk whose worker process died while running it."""
+
+    def __init__(self, crash: WorkerCrash) -> None:
+        super().__init__(crash.reason)
+        self.crash = crash
+
+
+class _RemoteTraceback(Exception):
+    """The traceback of an exception raised in a worker process, shown as its cause."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+    def __str__(self) -> str:
+        return f'\n"""\n{self.text}"""'
 
 
 def available_cores() -> int:
@@ -65,6 +120,188 @@ def _run_chunk(token: str, payload: bytes, values: list, batched: bool) -> tuple
     start = time.perf_counter()
     results = function(values) if batched else [function(value) for value in values]
     return list(results), time.perf_counter() - start
+
+
+def _worker_main(connection: Connection) -> None:
+    """A local worker process: run the chunks received on ``connection`` until told to stop.
+
+    Replies ``(True, (results, seconds))`` or ``(False, exception, traceback text)``. Ctrl-C is
+    left to the parent, which stops the workers; a ``SystemExit`` ends the worker like a crash.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    while True:
+        try:
+            job = connection.recv()
+        except EOFError:  # the parent has gone
+            return
+        if job is None:
+            return
+        try:
+            reply: tuple = (True, _run_chunk(*job))
+        except Exception as error:
+            reply = (False, error, traceback.format_exc())
+        try:
+            connection.send(reply)
+        except Exception as error:  # results or exception that cannot be pickled
+            message = f"the worker could not send its reply back: {type(error).__name__}: {error}"
+            connection.send((False, RuntimeError(message), traceback.format_exc()))
+
+
+def _death_reason(exit_code: int | None) -> str:
+    if exit_code is not None and exit_code < 0:
+        try:
+            name = signal.Signals(-exit_code).name
+        except ValueError:
+            name = f"signal {-exit_code}"
+        hint = "; e.g. the out-of-memory killer" if -exit_code == signal.SIGKILL else ""
+        return f"worker process died (exit code {exit_code} / signal {name}{hint})"
+    return f"worker process died (exit code {exit_code})"
+
+
+@dataclass
+class _Job:
+    future: futures.Future
+    message: tuple
+    started: float = 0.0
+
+
+@dataclass
+class _Worker:
+    process: BaseProcess
+    connection: Connection
+    job: _Job | None = field(default=None)
+
+
+def _stop_workers(workers: list[_Worker]) -> None:
+    """Stop idle workers politely and busy ones (whose results nobody awaits) at once."""
+    for worker in workers:
+        if worker.job is None:
+            with suppress(OSError):
+                worker.connection.send(None)
+        else:
+            worker.process.terminate()
+    deadline = time.monotonic() + _STOP_SECONDS
+    for worker in workers:
+        worker.process.join(max(deadline - time.monotonic(), 0.0))
+        if worker.process.exitcode is None:
+            worker.process.kill()
+            worker.process.join()
+        worker.connection.close()
+    workers.clear()
+
+
+class _WorkerPool:
+    """Local worker processes, each with its own pipe, driven from the calling thread.
+
+    Knowing which chunk each worker runs pins a worker's death on that chunk alone; the dead
+    worker is replaced at once. No background thread: queued chunks go to idle workers whenever
+    the caller submits or waits.
+    """
+
+    def __init__(self, context: BaseContext, n_workers: int) -> None:
+        self._context = context
+        self._workers: list[_Worker] = []
+        self._queue: deque[_Job] = deque()
+        self._finalizer = mp_util.Finalize(
+            self, _stop_workers, args=(self._workers,), exitpriority=10
+        )
+        for _ in range(n_workers):
+            self._workers.append(self._start_worker())
+
+    def _start_worker(self) -> _Worker:
+        parent_end, child_end = self._context.Pipe(duplex=True)
+        process = self._context.Process(
+            target=_worker_main, args=(child_end,), name="pymc_vcc-worker"
+        )
+        process.start()
+        child_end.close()
+        return _Worker(process, parent_end)
+
+    def _replace(self, worker: _Worker) -> None:
+        """Start a new process in place of ``worker``'s dead one; fail the chunk it was running."""
+        worker.process.join(_STOP_SECONDS)
+        if worker.process.exitcode is None:  # its pipe broke, yet it runs: end it
+            worker.process.kill()
+            worker.process.join()
+        crash = _death_reason(worker.process.exitcode)
+        worker.connection.close()
+        job = worker.job
+        new = self._start_worker()
+        worker.process, worker.connection, worker.job = new.process, new.connection, None
+        if job is not None:
+            elapsed = time.perf_counter() - job.started
+            job.future.set_exception(_WorkerDiedError(WorkerCrash(crash, elapsed)))
+
+    def submit(self, message: tuple) -> futures.Future:
+        """Queue a chunk ``(token, payload, values, batched)``; its future gets the reply."""
+        job = _Job(futures.Future(), message)
+        self._queue.append(job)
+        self._dispatch()
+        return job.future
+
+    def _dispatch(self) -> None:
+        for worker in self._workers:
+            while worker.job is None and self._queue:
+                job = self._queue.popleft()
+                if not job.future.set_running_or_notify_cancel():
+                    continue
+                job.started = time.perf_counter()
+                try:
+                    self._send(worker, job.message)
+                except Exception as error:  # e.g. items that cannot be pickled
+                    job.future.set_exception(error)
+                    continue
+                worker.job = job
+
+    def _send(self, worker: _Worker, message: tuple) -> None:
+        try:
+            worker.connection.send(message)
+        except (BrokenPipeError, ConnectionResetError):  # the worker died while idle
+            self._replace(worker)
+            worker.connection.send(message)
+
+    def _receive(self, worker: _Worker) -> None:
+        try:
+            reply = worker.connection.recv()
+        except (EOFError, OSError):
+            self._replace(worker)
+            return
+        except Exception as error:  # a reply this process cannot unpickle
+            reply = (False, error, traceback.format_exc())
+        job, worker.job = worker.job, None
+        assert job is not None
+        if reply[0]:
+            job.future.set_result(reply[1])
+        else:
+            error = reply[1]
+            error.__cause__ = _RemoteTraceback(reply[2])
+            job.future.set_exception(error)
+
+    def wait_first(self, pending: list[futures.Future]) -> list[futures.Future]:
+        """Block until at least one of ``pending`` is done; return the done ones."""
+        while True:
+            done = [future for future in pending if future.done()]
+            if done:
+                return done
+            self._dispatch()
+            busy = [worker for worker in self._workers if worker.job is not None]
+            if not busy:
+                raise RuntimeError("waiting for chunks that were never submitted to this pool")
+            handles = [worker.connection for worker in busy]
+            handles += [worker.process.sentinel for worker in busy]
+            ready = set(mp_connection.wait(handles))
+            for worker in busy:
+                if worker.connection in ready:
+                    self._receive(worker)
+                elif worker.process.sentinel in ready:
+                    self._replace(worker)
+
+    def close(self) -> None:
+        """Stop every worker (busy ones at once) and cancel queued chunks."""
+        for job in self._queue:
+            job.future.cancel()
+        self._queue.clear()
+        self._finalizer()
 
 
 class _ChunkSizer:
@@ -104,11 +341,17 @@ class Executor(ABC):
     kind: ClassVar[str]
     n_workers: int
     target_chunk_seconds: float = 0.05
+    # True when a dying worker fails only the chunk it was running; else the items of a crashed
+    # chunk are rerun one at a time with nothing else in flight, so that a crash names its item
+    _pins_crashes: ClassVar[bool] = True
 
     def map(
         self, fn: Callable[[Any], Any], items: Iterable[Any], *, chunksize: int | None = None
     ) -> list[Any]:
-        """``[fn(item) for item in items]``, computed by the workers, in input order."""
+        """``[fn(item) for item in items]``, computed by the workers, in input order.
+
+        An item whose run killed its worker process gives a :class:`WorkerCrash` instead.
+        """
         items = list(items)
         results: list[Any] = [None] * len(items)
         for index, result in self.imap_unordered(fn, items, chunksize=chunksize):
@@ -124,6 +367,8 @@ class Executor(ABC):
         batched: bool = False,
     ) -> Iterator[tuple[int, Any]]:
         """Yield ``(index, fn(item))`` as results finish; ``index`` is the item's position.
+
+        An item whose run killed its worker process gives ``(index, WorkerCrash(...))``.
 
         Items are read lazily, a bounded number of chunks ahead, so closing the iterator early
         (``break`` in a ``for`` loop over ``contextlib.closing(...)``) leaves the rest unread
@@ -152,30 +397,52 @@ class Executor(ABC):
         handle = self._prepare(fn)
         numbered = enumerate(items)
         sizer = _ChunkSizer(chunksize, self.target_chunk_seconds)
-        pending: dict[Any, tuple[int, ...]] = {}
+        pending: dict[Any, list[tuple[int, Any]]] = {}
+        again: deque[list[tuple[int, Any]]] = deque()  # chunks to submit before new ones
+        suspects: set[int] = set()  # items of crashed chunks, rerun alone to find the culprit
         exhausted = False
         try:
             while True:
-                while not exhausted and len(pending) < self._max_in_flight():
-                    chunk = list(islice(numbered, sizer.size))
-                    if not chunk:
-                        exhausted = True
+                isolate = bool(suspects) and not self._pins_crashes
+                while len(pending) < (1 if isolate else self._max_in_flight()):
+                    if again:
+                        chunk = again.popleft()
+                    elif not exhausted:
+                        chunk = list(islice(numbered, sizer.size))
+                        exhausted = not chunk
+                        if exhausted:
+                            break
+                    else:
                         break
-                    indices = tuple(index for index, _ in chunk)
-                    values = [value for _, value in chunk]
-                    pending[self._submit(handle, values, batched)] = indices
+                    pending[self._submit(handle, [value for _, value in chunk], batched)] = chunk
                 if not pending:
                     return
                 for future in self._wait_first(list(pending)):
-                    indices = pending.pop(future)
-                    results, seconds = future.result()
-                    if len(results) != len(indices):
+                    chunk = pending.pop(future)
+                    crash = self._crash(future)
+                    if crash is not None:
+                        if len(chunk) == 1:
+                            suspects.discard(chunk[0][0])
+                            yield [(chunk[0][0], crash)]
+                        else:
+                            suspects.update(index for index, _ in chunk)
+                            again.extend([item] for item in chunk)
+                        continue
+                    try:
+                        results, seconds = future.result()
+                    except futures.CancelledError:  # the backend lost the chunk or its inputs
+                        again.appendleft(chunk)
+                        continue
+                    if len(results) != len(chunk):
                         raise ValueError(
                             f"batched function returned {len(results)} results for "
-                            f"{len(indices)} items"
+                            f"{len(chunk)} items"
                         )
-                    sizer.record(len(indices), seconds)
-                    yield list(zip(indices, results, strict=True))
+                    sizer.record(len(chunk), seconds)
+                    suspects.difference_update(index for index, _ in chunk)
+                    yield [
+                        (index, result) for (index, _), result in zip(chunk, results, strict=True)
+                    ]
         finally:
             if pending:
                 self._cancel(list(pending))
@@ -194,6 +461,10 @@ class Executor(ABC):
     @abstractmethod
     def _wait_first(self, pending: list) -> Iterable[Any]:
         """Block until at least one pending future is done; return the done ones."""
+
+    def _crash(self, future: Any) -> WorkerCrash | None:
+        """The crash that ended a done chunk, if its worker died running it."""
+        return None
 
     def _cancel(self, pending: list) -> None:
         for future in pending:
@@ -253,6 +524,9 @@ class _PickledFunctionExecutor(Executor):
 class ProcessExecutor(_PickledFunctionExecutor):
     """A pool of local worker processes (forkserver start: safe in threaded programs).
 
+    A worker that dies is replaced at once, and its chunk rerun item by item (see the module
+    docstring).
+
     Args:
         n_workers: number of processes (default: every core this process may use).
     """
@@ -265,21 +539,38 @@ class ProcessExecutor(_PickledFunctionExecutor):
             raise ValueError(f"n_workers must be >= 1, got {self.n_workers}")
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["numpy", "xarray", "pymc_vcc.executors"])
-        self._pool = futures.ProcessPoolExecutor(max_workers=self.n_workers, mp_context=context)
+        self._pool = _WorkerPool(context, self.n_workers)
 
     def _prepare(self, fn: Callable[..., Any]) -> tuple[str, bytes]:
         return self._serialise(fn)
 
     def _submit(self, handle: tuple[str, bytes], values: list, batched: bool) -> futures.Future:
         token, payload = handle
-        return self._pool.submit(_run_chunk, token, payload, values, batched)
+        return self._pool.submit((token, payload, values, batched))
 
     def _wait_first(self, pending: list) -> Iterable[Any]:
-        done, _ = futures.wait(pending, return_when=futures.FIRST_COMPLETED)
-        return done
+        return self._pool.wait_first(pending)
+
+    def _crash(self, future: futures.Future) -> WorkerCrash | None:
+        error = future.exception()
+        return error.crash if isinstance(error, _WorkerDiedError) else None
 
     def close(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool.close()
+
+
+@dataclass
+class _ScatteredFunction:
+    """A function sent to every Dask worker once: its hash, its bytes and their scattered copy.
+
+    ``data`` becomes None once every worker holding the copy has died: the bytes then travel
+    with each chunk, so that a chunk whose worker dies is retried (and counted towards
+    ``KilledWorker``) rather than cancelled for a lost input.
+    """
+
+    token: str
+    payload: bytes
+    data: Any | None
 
 
 class DaskExecutor(_PickledFunctionExecutor):
@@ -295,6 +586,7 @@ class DaskExecutor(_PickledFunctionExecutor):
     """
 
     kind = "dask"
+    _pins_crashes = False  # every task queued on a dying worker counts towards KilledWorker
 
     def __init__(
         self, address: Any = None, n_workers: int | None = None, timeout: float = 60.0
@@ -320,18 +612,38 @@ class DaskExecutor(_PickledFunctionExecutor):
         """The ``distributed.Client`` in use."""
         return self._client
 
-    def _prepare(self, fn: Callable[..., Any]) -> tuple[str, Any]:
+    def _prepare(self, fn: Callable[..., Any]) -> _ScatteredFunction:
         token, payload = self._serialise(fn)
-        return token, self._client.scatter(payload, broadcast=True, hash=False)
+        return _ScatteredFunction(
+            token, payload, self._client.scatter(payload, broadcast=True, hash=False)
+        )
 
-    def _submit(self, handle: tuple[str, Any], values: list, batched: bool) -> Any:
-        token, payload = handle
-        return self._client.submit(_run_chunk, token, payload, values, batched, pure=False)
+    def _submit(self, handle: _ScatteredFunction, values: list, batched: bool) -> Any:
+        if handle.data is not None and handle.data.status != "finished":
+            handle.data = None
+        payload = handle.payload if handle.data is None else handle.data
+        return self._client.submit(_run_chunk, handle.token, payload, values, batched, pure=False)
 
     def _wait_first(self, pending: list) -> Iterable[Any]:
         from distributed import wait
 
-        return wait(pending, return_when="FIRST_COMPLETED").done
+        try:
+            return wait(pending, return_when="FIRST_COMPLETED").done
+        except futures.CancelledError:  # the scheduler cancels chunks whose inputs were lost
+            return [future for future in pending if future.status != "pending"]
+
+    def _crash(self, future: Any) -> WorkerCrash | None:
+        if future.status != "error":
+            return None
+        from distributed import KilledWorker
+
+        error = future.exception()
+        if not isinstance(error, KilledWorker):
+            return None
+        return WorkerCrash(
+            f"Dask worker process died running it, on each of {error.allowed_failures + 1} "
+            "workers tried (KilledWorker; see distributed.scheduler.allowed-failures)"
+        )
 
     def _cancel(self, pending: list) -> None:
         self._client.cancel(pending)

@@ -8,6 +8,9 @@ run can go wrong into a :class:`SimulationOutcome` with a failure kind and a rea
 ``reported``        the simulator returned a Dataset with ``attrs["status"] != "ok"``
 ``invalid-output``  outputs missing or misshapen
 ``non-finite``      NaN or infinite outputs
+``worker-crash``    the worker process running it died (segfault, ``os._exit``, out of memory):
+                    reported by the executor as a :class:`~pymc_vcc.executors.WorkerCrash`,
+                    which :func:`crash_outcome` turns into an outcome
 """
 
 from __future__ import annotations
@@ -23,17 +26,21 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
+from pymc_vcc.executors import WorkerCrash
 from pymc_vcc.series import InvalidOutputError, ObservedData, Simulator, extract_outputs
 
 OK = "ok"
+WORKER_CRASH = "worker-crash"
 FAILURE_KINDS: tuple[str, ...] = (
     "exception",
     "time-limit",
     "reported",
     "invalid-output",
     "non-finite",
+    WORKER_CRASH,
 )
-"""Every failure kind :func:`run_simulation` reports, in a fixed order."""
+"""Every failure kind of a simulation, in a fixed order: those :func:`run_simulation` reports,
+then ``worker-crash`` (:func:`crash_outcome`)."""
 
 _MAX_REASON_LENGTH = 300
 
@@ -181,3 +188,8 @@ def run_simulation(
         reason = f"output {observed.names[row]!r} has {count} non-finite value(s)"
         return SimulationOutcome(None, "non-finite", reason, elapsed)
     return SimulationOutcome(values, OK, "", elapsed)
+
+
+def crash_outcome(crash: WorkerCrash) -> SimulationOutcome:
+    """The outcome of a simulation whose worker process died running it."""
+    return SimulationOutcome(None, WORKER_CRASH, _shorten(crash.reason), crash.elapsed)

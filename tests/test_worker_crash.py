@@ -1,0 +1,237 @@
+"""A worker process that dies (segfault, os._exit) fails only the item that killed it."""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import cloudpickle
+import dask
+import numpy as np
+import pymc as pm
+import pytest
+import xarray as xr
+
+from pymc_vcc.abc import abc_rejection
+from pymc_vcc.executors import WorkerCrash, make_executor
+from pymc_vcc.outcomes import FAILURE_KINDS, WORKER_CRASH
+from pymc_vcc.predictive import sample_posterior_predictive
+from pymc_vcc.priors import UniformPrior
+from pymc_vcc.pymc_model import add_simulator
+from pymc_vcc.sensitivity import sobol_indices
+from pymc_vcc.smc import sample_smc_abc
+from pymc_vcc.testing import GaussianLocation
+
+SEGFAULTS = {37, 211}
+EXITS = {330}
+
+
+def _segfault() -> None:
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
+def _exit() -> None:
+    os._exit(1)
+
+
+def _double_or_die(value: int) -> int:
+    if value in SEGFAULTS:
+        _segfault()
+    if value in EXITS:
+        _exit()
+    return 2 * value
+
+
+def _log_or_die(item: tuple[str, float, Path]) -> str:
+    """Sleep, then die ("die") or log the run to a file ("log")."""
+    action, seconds, log = item
+    time.sleep(seconds)
+    if action == "die":
+        os._exit(1)
+    with open(log, "a") as file:
+        file.write("run\n")
+    return action
+
+
+KILLS = {"segfault": _segfault, "exit": _exit}
+
+
+@dataclass(frozen=True)
+class Crashing:
+    """GaussianLocation whose runs with mu in one of ``regions`` (low, high, "segfault" or
+    "exit") kill their process, or with ``raise_instead`` raise (the serial reference)."""
+
+    base: GaussianLocation
+    regions: tuple[tuple[float, float, str], ...]
+    raise_instead: bool = False
+
+    parameter_names = ("mu",)
+    output_names = ("y",)
+
+    def __call__(self, theta, rng):
+        for low, high, how in self.regions:
+            if low <= theta["mu"] < high:
+                if self.raise_instead:
+                    raise RuntimeError("would have killed the process")
+                KILLS[how]()
+        return self.base(theta, rng)
+
+    def raising(self) -> Crashing:
+        return Crashing(self.base, self.regions, raise_instead=True)
+
+    def doomed(self, mu: np.ndarray) -> np.ndarray:
+        """Which parameter values make a run fail."""
+        return np.any([(low <= mu) & (mu < high) for low, high, _ in self.regions], axis=0)
+
+
+# Each crash costs a new worker process (imports included), so few draws are doomed.
+BASE = GaussianLocation(n_time=20)
+CRASHING = Crashing(BASE, ((2.03, 2.05, "segfault"), (-2.43, -2.41, "exit")))
+OBSERVED = BASE({"mu": 0.3}, np.random.default_rng(0))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def ship_this_module_by_value():
+    """Send this module's functions by value: a new worker then needs not import it (and pymc)."""
+    module = sys.modules[__name__]
+    cloudpickle.register_pickle_by_value(module)
+    yield
+    cloudpickle.unregister_pickle_by_value(module)
+
+
+@pytest.fixture(scope="module")
+def pool():
+    with make_executor("processes", n_workers=2) as executor:
+        yield executor
+
+
+def test_only_the_items_that_kill_their_worker_become_crashes(pool):
+    chunks = list(pool.imap_chunks(_double_or_die, range(400), chunksize=50))
+    results = dict(item for chunk in chunks for item in chunk)
+    assert sorted(results) == list(range(400))  # every item exactly once
+    crashed = {index for index, result in results.items() if isinstance(result, WorkerCrash)}
+    assert crashed == SEGFAULTS | EXITS
+    for index in SEGFAULTS:
+        assert "exit code -11 / signal SIGSEGV" in results[index].reason
+    assert results[330].reason == "worker process died (exit code 1)"
+    assert all(results[i] == 2 * i for i in set(results) - crashed)
+    # the chunks that held a culprit, and only those, were rerun one item at a time
+    alone = {chunk[0][0] for chunk in chunks if len(chunk) == 1}
+    assert alone == set(range(0, 50)) | set(range(200, 250)) | set(range(300, 350))
+    # the pool is whole again: a map gives crashes in place and keeps going
+    again = pool.map(_double_or_die, [1, 37, 2])
+    assert again[::2] == [2, 4] and again[1].reason == results[37].reason
+    with pytest.raises(ZeroDivisionError) as error:
+        pool.map(lambda x: 1 / x, [1, 0])
+    assert "ZeroDivisionError" in str(error.value.__cause__)  # the worker's traceback
+
+
+def test_a_crash_leaves_the_other_workers_running_chunk_alone(pool, tmp_path):
+    log = tmp_path / "runs.txt"
+    results = pool.map(_log_or_die, [("log", 0.5, log), ("die", 0.05, log)], chunksize=1)
+    assert results[0] == "log" and isinstance(results[1], WorkerCrash)
+    assert log.read_text() == "run\n"  # the slow item ran once, beside the crash
+
+
+def test_abc_counts_crashes_as_failures_and_matches_the_serial_run(pool, tmp_path):
+    settings = dict(
+        n_pilot=120, quantile=0.2, n_main=300, n_desired=300, distance=BASE.distance, seed=4
+    )
+    prior = UniformPrior(BASE.bounds)
+    checkpoint = tmp_path / "run.sqlite"
+    crashed = abc_rejection(
+        CRASHING, prior, OBSERVED, executor=pool, checkpoint=checkpoint, **settings
+    )
+    serial = abc_rejection(CRASHING.raising(), prior, OBSERVED, executor="serial", **settings)
+
+    stats = crashed.sample_stats
+    status = stats["sim_status"].values
+    doomed = CRASHING.doomed(crashed.prior["mu"].values.ravel())
+    assert doomed.sum() == 3
+    np.testing.assert_array_equal(status == WORKER_CRASH, doomed)
+    assert list(stats["failure_kind"].values) == list(FAILURE_KINDS)
+    failures = dict(zip(stats["failure_kind"].values, stats["failures"].values, strict=True))
+    assert failures[WORKER_CRASH] == doomed.sum() == int(stats["n_failed"])
+    reasons = set(stats["sim_failure_reason"].values[doomed])
+    assert reasons == {
+        "worker process died (exit code -11 / signal SIGSEGV)",
+        "worker process died (exit code 1)",
+    }
+    # the same run as one whose doomed draws fail in an ordinary way
+    np.testing.assert_array_equal(crashed.posterior["mu"], serial.posterior["mu"])
+    np.testing.assert_array_equal(stats["sim_distance"], serial.sample_stats["sim_distance"])
+    np.testing.assert_array_equal(
+        np.where(doomed, "exception", status), serial.sample_stats["sim_status"]
+    )
+    # crashes are checkpointed: a resumed run simulates nothing again (serially, the doomed
+    # draws would now raise rather than crash)
+    resumed = abc_rejection(
+        CRASHING.raising(), prior, OBSERVED, executor="serial", checkpoint=checkpoint, **settings
+    )
+    np.testing.assert_array_equal(resumed.sample_stats["sim_status"], status)
+
+
+def test_predictive_and_sensitivity_count_crashed_runs(pool):
+    mu = np.linspace(-1.0, 1.0, 40).reshape(2, 20)
+    mu[0, 3], mu[1, 7], mu[1, 8] = 2.04, -2.42, -2.42
+    posterior = xr.DataTree.from_dict({"posterior": xr.Dataset({"mu": (("chain", "draw"), mu)})})
+    tree = sample_posterior_predictive(posterior, CRASHING, executor=pool, seed=1)
+    bands = tree["predictive_bands"]
+    assert bands.attrs["n_failed"] == 3
+    assert bands.attrs["failure_kinds"] == "worker-crash: 3"
+    failed = np.isnan(tree["posterior_predictive"]["y"]).all("time")
+    np.testing.assert_array_equal(failed, CRASHING.doomed(mu))
+
+    settings = dict(n_base=16, window=None, seed=2, n_resamples=10)
+    bounds = {"mu": (-3.0, 3.0)}
+    crashing = Crashing(BASE, ((1.1, 1.15, "segfault"), (-2.05, -2.0, "exit")))
+    crashed = sobol_indices(crashing, bounds, ["y"], executor=pool, **settings)
+    serial = sobol_indices(crashing.raising(), bounds, ["y"], executor="serial", **settings)
+    assert crashed.attrs["n_failed"] == serial.attrs["n_failed"] == 2
+    assert "worker-crash: worker process died" in crashed.attrs["failure_reasons"]
+    xr.testing.assert_equal(crashed.drop_attrs(), serial.drop_attrs())
+
+
+def test_smc_gives_crashed_particles_zero_likelihood(pool, caplog):
+    caplog.set_level(logging.WARNING, logger="pymc")
+    crashing = Crashing(BASE, ((2.9, 3.0, "segfault"),))  # one draw of the first population
+    runs = {}
+    for name, simulator, executor in (
+        ("crash", crashing, pool),
+        ("raise", crashing.raising(), "serial"),
+    ):
+        with pm.Model(), warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Numba will use object mode")
+            add_simulator(
+                "y", simulator, OBSERVED, prior=BASE.bounds, epsilon=0.5, distance=BASE.distance
+            )
+            runs[name] = sample_smc_abc(
+                draws=60, executor=executor, random_seed=6, progressbar=False
+            )
+    stats = runs["crash"].sample_stats.attrs
+    assert (
+        stats["n_failed_simulations"]
+        == runs["raise"].sample_stats.attrs["n_failed_simulations"]
+        > 0
+    )
+    assert stats["failure_kinds"] == f"worker-crash: {stats['n_failed_simulations']}"
+    np.testing.assert_array_equal(runs["crash"].posterior["mu"], runs["raise"].posterior["mu"])
+
+
+def test_dask_gives_up_on_the_item_that_kills_every_worker_and_on_it_alone():
+    # one worker: each death also counts against the innocent chunk queued beside the culprit
+    with (
+        dask.config.set({"distributed.scheduler.allowed-failures": 1}),
+        make_executor("dask", n_workers=1) as executor,
+    ):
+        results = executor.map(_double_or_die, [5, 330, 7, 8], chunksize=2)
+        assert results[0] == 10 and results[2:] == [14, 16]
+        assert isinstance(results[1], WorkerCrash)
+        assert "Dask worker process died" in results[1].reason
+        assert executor.map(_double_or_die, [1, 2]) == [2, 4]  # the function is sent again
