@@ -25,8 +25,8 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.abc import noise_parameter
-from pymc_vcc.executors import Executor, ExecutorKind, executor_scope
-from pymc_vcc.outcomes import run_simulation
+from pymc_vcc.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
+from pymc_vcc.outcomes import WORKER_CRASH, run_simulation
 from pymc_vcc.pymc_model import add_output_noise
 from pymc_vcc.series import ObservedData, OutputData, Simulator, prepare_observed
 
@@ -184,7 +184,12 @@ def sample_posterior_predictive(
         for i in range(n_chains * n_draws)
     ]
     with executor_scope(executor, n_workers) as pool:
-        results = pool.map(PredictiveRun(simulator, layout, time_limit_s), items)
+        results = [
+            (None, WORKER_CRASH, result.reason, None, None)
+            if isinstance(result, WorkerCrash)
+            else result
+            for result in pool.map(PredictiveRun(simulator, layout, time_limit_s), items)
+        ]
 
     finished = [r for r in results if r[0] is not None]
     if not finished:

@@ -20,8 +20,8 @@ import xarray as xr
 from SALib.analyze import sobol as sobol_analyze
 from SALib.sample import sobol as sobol_sample
 
-from pymc_vcc.executors import Executor, ExecutorKind, executor_scope
-from pymc_vcc.outcomes import run_simulation
+from pymc_vcc.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
+from pymc_vcc.outcomes import WORKER_CRASH, run_simulation
 from pymc_vcc.priors import validate_bounds
 from pymc_vcc.series import OutputData, Simulator, prepare_observed
 
@@ -115,7 +115,10 @@ def sobol_indices(
     rows = sobol_sample.sample(problem, n_base, calc_second_order=False, seed=seed)
     task = _SobolTask(WindowMean(simulator, outputs, window), names, seed)
     with executor_scope(executor) as runner:
-        results = runner.map(task, list(enumerate(rows)))
+        results = [
+            (None, WORKER_CRASH, result.reason) if isinstance(result, WorkerCrash) else result
+            for result in runner.map(task, list(enumerate(rows)))
+        ]
 
     block = len(names) + 2
     failed = np.array([means is None for means, _, _ in results]).reshape(n_base, block)

@@ -52,8 +52,14 @@ from pymc.smc.kernels import IMH, Pearson
 from pytensor.tensor.type_other import NoneTypeT
 from xarray import DataTree
 
-from pymc_vcc.executors import Executor, ExecutorKind, SerialExecutor, executor_scope
-from pymc_vcc.outcomes import OK, SimulationOutcome
+from pymc_vcc.executors import (
+    Executor,
+    ExecutorKind,
+    SerialExecutor,
+    WorkerCrash,
+    executor_scope,
+)
+from pymc_vcc.outcomes import OK, SimulationOutcome, crash_outcome
 from pymc_vcc.pymc_model import SimulatorFunction
 
 logger = logging.getLogger(__name__)
@@ -243,7 +249,10 @@ class ParallelIMH(IMH):
         batch = points[allowed]
         seeds = self._seeds.spawn(len(batch) * self._likelihood.n_nodes)
         tasks = self._likelihood.tasks(batch, seeds)
-        outcomes = self.executor.map(partial(_simulate, self._likelihood.functions), tasks)
+        outcomes = [
+            crash_outcome(result) if isinstance(result, WorkerCrash) else result
+            for result in self.executor.map(partial(_simulate, self._likelihood.functions), tasks)
+        ]
         for outcome in outcomes:
             if not outcome.ok:
                 self.failure_kinds[outcome.status] += 1
