@@ -1,7 +1,8 @@
 """pymc_vcc: Bayesian, likelihood-free calibration of dynamic vapor-compression-cycle models.
 
 The public API is re-exported here and imported lazily on first use, so that worker processes
-which only simulate never pay for importing PyMC. See the README for a tour.
+which only simulate never pay for importing PyMC. The function ``simulate`` lives in the
+module of the same name: ``from pymc_vcc.simulate import simulate``. See the README for a tour.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "make_inputs",
     ),
     "pymc_vcc.cycle": ("OUTPUT_IDS",),
-    "pymc_vcc.simulate": ("simulate", "VCCSimulator", "operating_point"),
+    "pymc_vcc.simulate": ("VCCSimulator", "operating_point"),
     "pymc_vcc.measurements": ("load_measurements", "Measurements", "example_log_path"),
     "pymc_vcc.distances": ("ks_distance", "ks_distances"),
     "pymc_vcc.priors": ("Prior", "UniformPrior", "GMMPrior", "load_prior"),

@@ -272,7 +272,8 @@ def simulator_bounds(
         simulator: a simulator with ``bounds`` (name -> (low, high), as in
             :mod:`pymc_vcc.testing`) or with a unit description (``simulator.unit.parameters``,
             Table III of the paper, as :class:`pymc_vcc.simulate.VCCSimulator`).
-        parameters: names to keep, in this order (default: all).
+        parameters: names to keep, in this order (default: the simulator's
+            ``parameter_names`` if it has them, else all).
     """
     if hasattr(simulator, "bounds"):
         available = dict(simulator.bounds)
@@ -284,7 +285,7 @@ def simulator_bounds(
             "pass prior= explicitly"
         )
     if parameters is None:
-        return available
+        parameters = getattr(simulator, "parameter_names", None) or list(available)
     if isinstance(parameters, str):
         raise TypeError(f"parameters must be a sequence of names, got the string {parameters!r}")
     unknown = [name for name in parameters if name not in available]
