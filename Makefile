@@ -37,3 +37,4 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) results build *.egg-info
+	find pymc_vcc -name "*.nbi" -o -name "*.nbc" | xargs rm -f
