@@ -89,6 +89,13 @@ def test_results_do_not_depend_on_the_executor_and_draws_can_be_thinned(line_pos
         serial["posterior_predictive"].to_dataset(), parallel["posterior_predictive"].to_dataset()
     )
     assert serial["posterior_predictive"]["y"].shape == (2, 15, 20)
+    from_sequence = sample_posterior_predictive(
+        line_posterior, sim, executor="serial", seed=np.random.SeedSequence(6), max_draws=30
+    )
+    xr.testing.assert_equal(
+        serial["posterior_predictive"].to_dataset(),
+        from_sequence["posterior_predictive"].to_dataset(),
+    )
 
 
 def test_bad_arguments_are_named(line_posterior):
