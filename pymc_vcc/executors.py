@@ -52,6 +52,7 @@ from multiprocessing import util as mp_util
 from multiprocessing.connection import Connection
 from multiprocessing.context import BaseContext
 from multiprocessing.process import BaseProcess
+from multiprocessing.reduction import ForkingPickler
 from typing import Any, ClassVar, Literal
 
 import cloudpickle
@@ -62,6 +63,7 @@ EXECUTOR_KINDS: tuple[str, ...] = ("serial", "processes", "dask")
 _FUNCTION_CACHE: dict[str, Callable[..., Any]] = {}
 _FUNCTION_CACHE_SIZE = 4
 _STOP_SECONDS = 5.0
+_AHEAD_BYTES = 4096  # a chunk message this small may wait in a busy worker's pipe (never blocks)
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,6 +164,7 @@ def _death_reason(exit_code: int | None) -> str:
 class _Job:
     future: futures.Future
     message: tuple
+    data: bytes | None = None  # the pickled message, once taken from the queue
     started: float = 0.0
 
 
@@ -169,17 +172,17 @@ class _Job:
 class _Worker:
     process: BaseProcess
     connection: Connection
-    job: _Job | None = field(default=None)
+    jobs: deque[_Job] = field(default_factory=deque)  # sent, in order: the first one runs
 
 
 def _stop_workers(workers: list[_Worker]) -> None:
     """Stop idle workers politely and busy ones (whose results nobody awaits) at once."""
     for worker in workers:
-        if worker.job is None:
+        if worker.jobs:
+            worker.process.terminate()
+        else:
             with suppress(OSError):
                 worker.connection.send(None)
-        else:
-            worker.process.terminate()
     deadline = time.monotonic() + _STOP_SECONDS
     for worker in workers:
         worker.process.join(max(deadline - time.monotonic(), 0.0))
@@ -193,9 +196,11 @@ def _stop_workers(workers: list[_Worker]) -> None:
 class _WorkerPool:
     """Local worker processes, each with its own pipe, driven from the calling thread.
 
-    Knowing which chunk each worker runs pins a worker's death on that chunk alone; the dead
-    worker is replaced at once. No background thread: queued chunks go to idle workers whenever
-    the caller submits or waits.
+    Each worker runs the chunks sent to it in order, and may hold one small chunk ahead (so
+    that it never waits for the caller between chunks); knowing which chunk each worker runs
+    pins a worker's death on that chunk alone, the chunk queued behind it goes back to the
+    queue, and a new worker takes the dead one's place. No background thread: queued chunks go
+    to workers whenever the caller submits or waits.
     """
 
     def __init__(self, context: BaseContext, n_workers: int) -> None:
@@ -219,18 +224,23 @@ class _WorkerPool:
 
     def _replace(self, worker: _Worker) -> None:
         """Start a new process in place of ``worker``'s dead one; fail the chunk it was running."""
+        while worker.jobs and worker.connection.poll():  # replies sent before it died count
+            if not self._receive_reply(worker):
+                break
         worker.process.join(_STOP_SECONDS)
         if worker.process.exitcode is None:  # its pipe broke, yet it runs: end it
             worker.process.kill()
             worker.process.join()
-        crash = _death_reason(worker.process.exitcode)
+        reason = _death_reason(worker.process.exitcode)
         worker.connection.close()
-        job = worker.job
+        jobs = worker.jobs
         new = self._start_worker()
-        worker.process, worker.connection, worker.job = new.process, new.connection, None
-        if job is not None:
-            elapsed = time.perf_counter() - job.started
-            job.future.set_exception(_WorkerDiedError(WorkerCrash(crash, elapsed)))
+        worker.process, worker.connection, worker.jobs = new.process, new.connection, deque()
+        if jobs:
+            running = jobs.popleft()
+            elapsed = time.perf_counter() - running.started
+            running.future.set_exception(_WorkerDiedError(WorkerCrash(reason, elapsed)))
+            self._queue.extendleft(reversed(jobs))  # never started: queued again, first
 
     def submit(self, message: tuple) -> futures.Future:
         """Queue a chunk ``(token, payload, values, batched)``; its future gets the reply."""
@@ -239,52 +249,71 @@ class _WorkerPool:
         self._dispatch()
         return job.future
 
-    def _dispatch(self) -> None:
-        for worker in self._workers:
-            while worker.job is None and self._queue:
-                job = self._queue.popleft()
+    def _take(self, ahead: bool) -> _Job | None:
+        """The next queued chunk to send (None if none, or if it is too big to wait ahead)."""
+        while self._queue:
+            job = self._queue[0]
+            if job.data is None:
                 if not job.future.set_running_or_notify_cancel():
+                    self._queue.popleft()
                     continue
-                job.started = time.perf_counter()
                 try:
-                    self._send(worker, job.message)
+                    job.data = bytes(ForkingPickler.dumps(job.message))
                 except Exception as error:  # e.g. items that cannot be pickled
+                    self._queue.popleft()
                     job.future.set_exception(error)
                     continue
-                worker.job = job
+            if ahead and len(job.data) > _AHEAD_BYTES:
+                return None
+            return self._queue.popleft()
+        return None
 
-    def _send(self, worker: _Worker, message: tuple) -> None:
-        try:
-            worker.connection.send(message)
-        except (BrokenPipeError, ConnectionResetError):  # the worker died while idle
-            self._replace(worker)
-            worker.connection.send(message)
+    def _dispatch(self) -> None:
+        """Give every idle worker a chunk, then each busy one a small chunk to hold ahead."""
+        while self._queue:
+            worker = min(self._workers, key=lambda candidate: len(candidate.jobs))
+            if len(worker.jobs) > 1:
+                return
+            job = self._take(ahead=bool(worker.jobs))
+            if job is None:
+                return
+            try:
+                worker.connection.send_bytes(job.data)
+            except (BrokenPipeError, ConnectionResetError):  # the worker has died
+                self._queue.appendleft(job)
+                self._replace(worker)
+                continue
+            if not worker.jobs:
+                job.started = time.perf_counter()
+            worker.jobs.append(job)
 
-    def _receive(self, worker: _Worker) -> None:
+    def _receive_reply(self, worker: _Worker) -> bool:
+        """Read the reply to ``worker``'s running chunk; False if the worker has gone."""
         try:
             reply = worker.connection.recv()
         except (EOFError, OSError):
-            self._replace(worker)
-            return
+            return False
         except Exception as error:  # a reply this process cannot unpickle
             reply = (False, error, traceback.format_exc())
-        job, worker.job = worker.job, None
-        assert job is not None
+        job = worker.jobs.popleft()
+        if worker.jobs:
+            worker.jobs[0].started = time.perf_counter()
         if reply[0]:
             job.future.set_result(reply[1])
         else:
             error = reply[1]
             error.__cause__ = _RemoteTraceback(reply[2])
             job.future.set_exception(error)
+        return True
 
     def wait_first(self, pending: list[futures.Future]) -> list[futures.Future]:
         """Block until at least one of ``pending`` is done; return the done ones."""
+        self._dispatch()
         while True:
             done = [future for future in pending if future.done()]
             if done:
                 return done
-            self._dispatch()
-            busy = [worker for worker in self._workers if worker.job is not None]
+            busy = [worker for worker in self._workers if worker.jobs]
             if not busy:
                 raise RuntimeError("waiting for chunks that were never submitted to this pool")
             handles = [worker.connection for worker in busy]
@@ -292,9 +321,11 @@ class _WorkerPool:
             ready = set(mp_connection.wait(handles))
             for worker in busy:
                 if worker.connection in ready:
-                    self._receive(worker)
+                    if not self._receive_reply(worker):
+                        self._replace(worker)
                 elif worker.process.sentinel in ready:
                     self._replace(worker)
+            self._dispatch()  # feed freed workers before the caller handles the results
 
     def close(self) -> None:
         """Stop every worker (busy ones at once) and cancel queued chunks."""

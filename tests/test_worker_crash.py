@@ -132,11 +132,18 @@ def test_only_the_items_that_kill_their_worker_become_crashes(pool):
     assert "ZeroDivisionError" in str(error.value.__cause__)  # the worker's traceback
 
 
-def test_a_crash_leaves_the_other_workers_running_chunk_alone(pool, tmp_path):
+def test_a_crash_leaves_the_other_chunks_alone(pool, tmp_path):
     log = tmp_path / "runs.txt"
     results = pool.map(_log_or_die, [("log", 0.5, log), ("die", 0.05, log)], chunksize=1)
     assert results[0] == "log" and isinstance(results[1], WorkerCrash)
     assert log.read_text() == "run\n"  # the slow item ran once, beside the crash
+    # one worker: the chunk it held ahead, behind the one that killed it, runs once, elsewhere
+    queued = tmp_path / "queued.txt"
+    with make_executor("processes", n_workers=1) as single:
+        items = [("die", 0.05, queued), ("log", 0.0, queued)]
+        results = single.map(_log_or_die, items, chunksize=1)
+    assert isinstance(results[0], WorkerCrash) and results[1] == "log"
+    assert queued.read_text() == "run\n"
 
 
 def test_abc_counts_crashes_as_failures_and_matches_the_serial_run(pool, tmp_path):
@@ -226,6 +233,7 @@ def test_smc_gives_crashed_particles_zero_likelihood(pool, caplog):
 
 def test_dask_gives_up_on_the_item_that_kills_every_worker_and_on_it_alone():
     # one worker: each death also counts against the innocent chunk queued beside the culprit
+    pytest.importorskip("distributed")  # its config defaults, which dask.config.set must keep
     with (
         dask.config.set({"distributed.scheduler.allowed-failures": 1}),
         make_executor("dask", n_workers=1) as executor,
