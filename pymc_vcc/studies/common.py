@@ -99,6 +99,17 @@ class StudySettings:
         """The :class:`Budget` in force."""
         return get_budget(self.budget)
 
+    def rejection_options(self) -> dict[str, Any]:
+        """Keyword arguments of the rejection samplers: the budget's Table I settings, progress."""
+        work = self.work
+        return {
+            "n_pilot": work.n_pilot,
+            "quantile": work.quantile,
+            "n_main": work.n_main,
+            "n_desired": work.n_desired,
+            "progress": self.progress,
+        }
+
     @contextmanager
     def open_executor(self) -> Iterator[Executor]:
         """An executor of the configured kind, closed on exit."""

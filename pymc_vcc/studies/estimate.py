@@ -132,29 +132,24 @@ def estimation_study(
                 raise
     observed = [ref.sel(time=slice(0.0, t_calibration)) for ref in references]
     calibration_model = VCCSimulator(unit, full.inputs, t_window=(0.0, t_calibration))
-    budget = settings.work
     prior = UniformPrior({spec.id: (spec.low, spec.high) for spec in unit.parameters})
     with settings.open_executor() as executor:
         calibration = sequential_calibration(
             calibration_model,
             prior,
             observed,
-            n_pilot=budget.n_pilot,
-            quantile=budget.quantile,
-            n_main=budget.n_main,
-            n_desired=budget.n_desired,
             noise=dict.fromkeys(OUTPUT_IDS, noise_bounds),
             executor=executor,
             checkpoint=settings.checkpoint_folder("estimate"),
             seed=sampler_seed,
-            progress=settings.progress,
+            **settings.rejection_options(),
         )
         predictive = [
             sample_posterior_predictive(
                 tree,
                 full,
                 reference=reference,
-                max_draws=budget.predictive_draws,
+                max_draws=settings.work.predictive_draws,
                 executor=executor,
                 seed=seed,
             )

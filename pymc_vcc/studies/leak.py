@@ -104,26 +104,21 @@ def _calibrate(
     stage: int,
     epsilon: float,
 ) -> tuple[xr.DataTree, int]:
-    budget = settings.work
     if sampler == "rejection":
         tree = abc_rejection(
             simulator,
             prior,
             observed,
-            n_pilot=budget.n_pilot,
-            quantile=budget.quantile,
-            n_main=budget.n_main,
-            n_desired=budget.n_desired,
             executor=executor,
             checkpoint=settings.checkpoint(f"leak_{stage}"),
             seed=seed,
-            progress=settings.progress,
+            **settings.rejection_options(),
         )
         return tree, int(tree["sample_stats"]["n_simulations"])
     with pm.Model():
         add_simulator("outputs", simulator, observed, prior=prior, epsilon=epsilon)
         tree = sample_smc_abc(
-            budget.smc_draws,
+            settings.work.smc_draws,
             executor=executor,
             random_seed=int(seed.generate_state(1)[0]),
             progressbar=bool(settings.progress),
