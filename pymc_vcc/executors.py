@@ -19,16 +19,18 @@ BLAS do): a script using the ``"processes"`` executor needs the usual
 
 Worker crashes. A worker process that dies while running a chunk (a segfault in compiled code,
 ``os._exit``, the out-of-memory killer) never stops the stream: the chunk's items run again, one
-item per chunk, and an item whose lone run kills its worker too is the culprit: it comes back as
-a :class:`WorkerCrash` instead of a result (``map`` puts it at the item's position). Nothing
-already finished is lost. The local-process backend gives each worker its own pipe, so a death is
-pinned on the chunk that worker was running, a new worker takes its place at once and the other
-workers go on undisturbed. On Dask the scheduler retries a task whose worker died and gives up
-after ``distributed.scheduler.allowed-failures`` more deaths (``KilledWorker``); it counts a
-death against every task queued on that worker, so the items of a chunk that gave up are rerun
-one at a time with nothing else in flight, and one that gives up alone is the culprit. Dask
-workers started without a nanny are not restarted: once all have died, the run waits for new
-ones. The serial backend runs items in the calling process: a crash there ends the caller.
+item per chunk, and an item whose lone run kills its worker too is the culprit: it comes back as a
+:class:`WorkerCrash` instead of a result (``map`` puts it at the item's position). Nothing already
+finished is lost. The local-process backend gives each worker its own pipe, so a death is pinned on
+the chunk that worker was running, a new worker takes its place at once and the other workers go on
+undisturbed; a crash costs the start of that worker (with the imports of the main script and of
+``fn``'s modules: a fraction of a second to a few seconds). On Dask the scheduler retries a task
+whose worker died and gives up after ``distributed.scheduler.allowed-failures`` more deaths
+(``KilledWorker``); it counts a death against every task queued on that worker, so the items of a
+chunk that gave up are rerun one at a time with nothing else in flight, and one that gives up alone
+is the culprit. Dask workers started without a nanny are not restarted: once all have died, the run
+waits for new ones. The serial backend runs items in the calling process: a crash there ends the
+caller.
 """
 
 from __future__ import annotations
