@@ -30,7 +30,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.priors": ("Prior", "UniformPrior", "GMMPrior", "load_prior"),
     "pymc_vcc.abc": ("abc_rejection", "TooManyFailuresError"),
     "pymc_vcc.sequential": ("sequential_calibration", "SequentialResult"),
-    "pymc_vcc.executors": ("make_executor", "Executor"),
+    "pymc_vcc.executors": ("make_executor", "Executor", "WorkerCrash"),
     "pymc_vcc.pymc_model": ("add_simulator", "gmm_prior_variable"),
     "pymc_vcc.smc": ("sample_smc_abc", "ParallelIMH"),
     "pymc_vcc.predictive": ("sample_posterior_predictive",),

@@ -52,6 +52,20 @@ def noise_parameter(output: str) -> str:
     return f"{NOISE_PREFIX}{output}"
 
 
+def add_output_noise(
+    values: np.ndarray, scales: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
+    """The paper's output noise: values + ν_j·|values|·Z, Z ~ N(0, 1) per output j and time.
+
+    Args:
+        values: outputs (n_outputs, n_time).
+        scales: ν per output (n_outputs,), dimensionless.
+        rng: the simulation's random generator.
+    """
+    scales = np.asarray(scales, dtype=float).reshape(-1, 1)
+    return values + scales * np.abs(values) * rng.standard_normal(values.shape)
+
+
 def simulation_rng(
     entropy: int, spawn_key: tuple[int, ...], stream: int, index: int
 ) -> np.random.Generator:
@@ -95,8 +109,8 @@ class SimulationTask:
         """Y + ν·|Y|·Z with ν per output (0 for outputs without a noise scale)."""
         if all(column < 0 for column in self.noise_columns):
             return values
-        scale = np.array([theta[c] if c >= 0 else 0.0 for c in self.noise_columns])[:, None]
-        return values + scale * np.abs(values) * rng.standard_normal(values.shape)
+        scales = np.array([theta[c] if c >= 0 else 0.0 for c in self.noise_columns])
+        return add_output_noise(values, scales, rng)
 
     def __call__(self, items: list[tuple[int, int, np.ndarray]]) -> list[SimulationRecord]:
         records: list[SimulationRecord | None] = [None] * len(items)

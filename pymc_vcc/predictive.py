@@ -24,10 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.abc import noise_parameter
+from pymc_vcc.abc import add_output_noise, noise_parameter
 from pymc_vcc.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
 from pymc_vcc.outcomes import WORKER_CRASH, run_simulation
-from pymc_vcc.pymc_model import add_output_noise
 from pymc_vcc.series import ObservedData, OutputData, Simulator, prepare_observed
 
 BANDS = ("lower", "median", "upper")

@@ -30,25 +30,11 @@ from pytensor.graph.basic import Apply
 from pytensor.graph.op import Op
 from pytensor.tensor.variable import TensorVariable
 
-from pymc_vcc.abc import NOISE_PREFIX, noise_parameter, with_noise
+from pymc_vcc.abc import NOISE_PREFIX, add_output_noise, noise_parameter, with_noise
 from pymc_vcc.distances import BatchDistance, ks_distances
 from pymc_vcc.outcomes import SimulationOutcome, run_simulation
 from pymc_vcc.priors import Bounds, GMMPrior, Prior, UniformPrior
 from pymc_vcc.series import ObservedData, OutputData, Simulator, prepare_observed
-
-
-def add_output_noise(
-    values: np.ndarray, scales: np.ndarray, rng: np.random.Generator
-) -> np.ndarray:
-    """The paper's output noise: values + ν_j·|values|·Z, Z ~ N(0, 1) per output j and time.
-
-    Args:
-        values: outputs (n_outputs, n_time).
-        scales: ν per output (n_outputs,), dimensionless.
-        rng: the simulation's random generator.
-    """
-    scales = np.asarray(scales, dtype=float).reshape(-1, 1)
-    return values + scales * np.abs(values) * rng.standard_normal(values.shape)
 
 
 def gaussian_log_kernel(distance: np.ndarray | float, epsilon: float) -> np.ndarray:
@@ -417,7 +403,6 @@ __all__ = [
     "DistanceKernel",
     "SimulatorFunction",
     "SimulatorNode",
-    "add_output_noise",
     "add_simulator",
     "gaussian_log_kernel",
     "gmm_prior_variable",
