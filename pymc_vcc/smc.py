@@ -380,7 +380,9 @@ def sample_smc_abc(
     if int(draws) != draws or draws < 2:
         raise ValueError(f"draws must be an integer >= 2, got {draws}")
     kwargs.setdefault("compute_convergence_checks", chains > 1)
-    with executor_scope(executor, n_workers) as opened:
+    with executor_scope(executor, n_workers) as opened, warnings.catch_warnings():
+        # The distance kernel is a Python Op by design: the simulations run outside PyTensor.
+        warnings.filterwarnings("ignore", "Numba will use object mode", UserWarning)
         return pm.sample_smc(
             draws=int(draws),
             kernel=ParallelIMH,
