@@ -19,7 +19,17 @@ from the same random generator in the same order: with a simulator that does not
 random stream, the same seed gives the same posterior as the stock kernel, bit for bit.
 
 Simulations run and failed per stage are recorded in ``sample_stats`` (``simulations``,
-``failed_simulations``, ``stage_seconds``) and their totals in its attributes.
+``failed_simulations``, ``resumed_simulations``, ``stage_seconds``) and their totals in its
+attributes.
+
+Checkpoints (``sample_smc_abc(checkpoint=path)``): with a fixed seed, a run proposes the same
+particles in the same order, each simulation with the same random stream; so a run started again
+requests the same simulations. Each finished one is persisted, chunk by chunk as the executor
+returns them, in a :class:`~pymc_vcc.store.LikelihoodStore` under a key digesting its particle,
+its node and its random stream, with its log-likelihood term and failure status (not its
+outputs). A run resumed after a crash takes those from the file instead of simulating them again
+(``resumed_simulations``) and gives the uninterrupted run's posterior, bit for bit; a run with
+other settings (draws, prior, observed data, ε, simulator, seed...) is refused, naming them.
 
 Why one chain by default (:func:`sample_smc_abc`): an SMC stage already offers ``draws``
 independent simulations to run in parallel, so one chain keeps every worker busy; each extra
@@ -32,12 +42,14 @@ uses the whole executor.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import time
 import warnings
 from collections import Counter
 from collections.abc import Callable, Sequence
 from functools import partial
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -49,6 +61,8 @@ from pymc.model import Model, modelcontext
 from pymc.pytensorf import compile as compile_pytensor
 from pymc.pytensorf import floatX, join_nonshared_inputs, make_shared_replacements
 from pymc.smc.kernels import IMH, Pearson
+from pytensor.graph.basic import Constant
+from pytensor.graph.traversal import ancestors
 from pytensor.tensor.type_other import NoneTypeT
 from xarray import DataTree
 
@@ -61,6 +75,7 @@ from pymc_vcc.executors import (
 )
 from pymc_vcc.outcomes import OK, SimulationOutcome, crash_outcome
 from pymc_vcc.pymc_model import SimulatorFunction
+from pymc_vcc.store import LikelihoodRecord, LikelihoodStore
 
 logger = logging.getLogger(__name__)
 
@@ -124,25 +139,30 @@ class _BatchLikelihood:
             self._slices.append(slice(first, len(node_inputs)))
         node_inputs = model.replace_rvs_by_values(node_inputs)
 
-        simulated = [rv.type() for rv in nodes]
         terms = []
-        for rv, placeholder in zip(nodes, simulated, strict=True):
+        for rv in nodes:
             op = rv.owner.op
             observed = model.rvs_to_values[rv]
-            terms.append(
-                pt.sum(op.distance(op.epsilon, op.sum_stat(observed), op.sum_stat(placeholder)))
-            )
+            placeholder = rv.type()
+            term = pt.sum(op.distance(op.epsilon, op.sum_stat(observed), op.sum_stat(placeholder)))
+            terms.append((term, placeholder))
         other_terms = model.logp(vars=others) if others else pt.constant(0.0)
-        loglik = pt.sum(pt.stack(terms)) + other_terms + model.potentiallogp
+        rest = other_terms + model.potentiallogp
 
         point = model.initial_point()
         shared = make_shared_replacements(point, value_vars, model)
-        outputs, flat = join_nonshared_inputs(point, [loglik, *node_inputs], value_vars, shared)
+        outputs, flat = join_nonshared_inputs(
+            point, [rest, *(term for term, _ in terms), *node_inputs], value_vars, shared
+        )
         kwargs = {**(compile_kwargs or {}), "on_unused_input": "ignore"}
-        self._loglik = compile_pytensor([flat, *simulated], outputs[0], **kwargs)
-        self._inputs = compile_pytensor([flat], outputs[1:], **kwargs)
-        self._loglik.trust_input = True
-        self._inputs.trust_input = True
+        self._rest = compile_pytensor([flat], outputs[0], **kwargs)
+        self._terms = [
+            compile_pytensor([flat, placeholder], outputs[1 + node], **kwargs)
+            for node, (_, placeholder) in enumerate(terms)
+        ]
+        self._inputs = compile_pytensor([flat], outputs[1 + self.n_nodes :], **kwargs)
+        for function in (self._rest, *self._terms, self._inputs):
+            function.trust_input = True
         self._dtypes = [rv.type.dtype for rv in nodes]
 
     def tasks(self, points: np.ndarray, seeds: Sequence[np.random.SeedSequence]) -> list[tuple]:
@@ -156,20 +176,34 @@ class _BatchLikelihood:
                 tasks.append((node, seed, None if size.size == 0 else size, params))
         return tasks
 
-    def evaluate(self, points: np.ndarray, outcomes: Sequence[SimulationOutcome]) -> np.ndarray:
-        """Log-likelihood of each point from its nodes' outcomes; −inf where any failed."""
+    def term(self, node: int, point: np.ndarray, outcome: SimulationOutcome) -> float:
+        """The log-likelihood term of one simulation of ``node`` at ``point``; NaN if failed."""
+        if not outcome.ok:
+            return np.nan
+        values = np.asarray(outcome.values, dtype=self._dtypes[node])
+        return float(self._terms[node](point, values))
+
+    def evaluate(self, points: np.ndarray, terms: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        """Log-likelihood of each point from its nodes' terms (node-major, as the tasks); −inf
+        where any simulation failed."""
         n = len(points)
+        terms = terms.reshape(self.n_nodes, n)
+        ok = ok.reshape(self.n_nodes, n).all(axis=0)
         loglik = np.full(n, -np.inf)
-        for index, point in enumerate(points):
-            runs = [outcomes[node * n + index] for node in range(self.n_nodes)]
-            if all(run.ok for run in runs):
-                simulated = [
-                    np.asarray(run.values, dtype=dtype)
-                    for run, dtype in zip(runs, self._dtypes, strict=True)
-                ]
-                loglik[index] = float(self._loglik(point, *simulated))
+        for index in np.flatnonzero(ok):
+            total = terms[0, index]
+            for node in range(1, self.n_nodes):
+                total = total + terms[node, index]
+            loglik[index] = total + float(self._rest(points[index]))
         loglik[np.isnan(loglik)] = -np.inf
         return loglik
+
+
+def _simulation_key(point: np.ndarray, node: int, seed: np.random.SeedSequence) -> str:
+    """Checkpoint key of one simulation: digest of the particle, the node and the random stream."""
+    digest = hashlib.sha256(np.ascontiguousarray(point, dtype=float).tobytes())
+    digest.update(f"{node}|{seed.entropy}|{tuple(seed.spawn_key)}".encode())
+    return digest.hexdigest()
 
 
 class ParallelIMH(IMH):
@@ -182,6 +216,9 @@ class ParallelIMH(IMH):
     Args:
         executor: where simulations run, an executor of :mod:`pymc_vcc.executors` (the caller
             opens and closes it); None runs them in this process.
+        checkpoint: an open :class:`~pymc_vcc.store.LikelihoodStore` (the caller opens and
+            closes it, fingerprinting the run: :func:`sample_smc_abc` does): each finished
+            simulation is persisted there, and one already there is not run again.
         correlation_threshold: as for ``pymc.smc.kernels.IMH``.
         **kwargs: the stock kernel's arguments (``draws``, ``model``, ``threshold``, ...).
     """
@@ -190,11 +227,17 @@ class ParallelIMH(IMH):
         **IMH.stats_dtypes_shapes,
         "simulations": (int, []),
         "failed_simulations": (int, []),
+        "resumed_simulations": (int, []),
         "stage_seconds": (float, []),
     }
 
     def __init__(
-        self, *args, executor: Executor | None = None, correlation_threshold=0.01, **kwargs
+        self,
+        *args,
+        executor: Executor | None = None,
+        checkpoint: LikelihoodStore | None = None,
+        correlation_threshold=0.01,
+        **kwargs,
     ) -> None:
         compile_kwargs = dict(kwargs.get("compile_kwargs") or {})
         super().__init__(*args, correlation_threshold=correlation_threshold, **kwargs)
@@ -204,6 +247,8 @@ class ParallelIMH(IMH):
                 f"got {type(executor).__name__}; sample_smc_abc also accepts a kind name"
             )
         self.executor: Executor = SerialExecutor() if executor is None else executor
+        self.checkpoint = checkpoint
+        self._finished: dict[str, LikelihoodRecord] = {}
         self._likelihood = _BatchLikelihood(
             modelcontext(kwargs.get("model")), self.variables, compile_kwargs
         )
@@ -213,13 +258,20 @@ class ParallelIMH(IMH):
     def _reset_counters(self) -> None:
         self._stage_simulations = 0
         self._stage_failures = 0
+        self._stage_resumed = 0
         self._stage_start = time.perf_counter()
         self.total_simulations = 0
         self.total_failures = 0
+        self.total_resumed = 0
         self.failure_kinds: Counter[str] = Counter()
         self.failure_reasons: list[str] = []
 
     def __getstate__(self) -> dict:
+        if self.checkpoint is not None:
+            raise ValueError(
+                "a ParallelIMH kernel with a checkpoint cannot run in another process; pass "
+                "cores=1 to pm.sample_smc (or use pymc_vcc.smc.sample_smc_abc)"
+            )
         state = self.__dict__.copy()
         if not isinstance(self.executor, SerialExecutor):
             warnings.warn(
@@ -238,10 +290,12 @@ class ParallelIMH(IMH):
         # the chain generator that drives proposals and resampling.
         self._seeds = rng.bit_generator.seed_seq.spawn(1)[0]
         self._reset_counters()
+        self._finished = self.checkpoint.load() if self.checkpoint is not None else {}
         super().initialize(start, rng)
 
     def _simulated_loglik(self, points: np.ndarray, prior_logp: np.ndarray) -> np.ndarray:
-        """Log-likelihood of points, simulating (in one batch) only those the prior allows."""
+        """Log-likelihood of points, simulating (in one batch) only those the prior allows and
+        the checkpoint does not hold yet."""
         loglik = np.full(len(points), -np.inf)
         allowed = np.flatnonzero(np.isfinite(prior_logp))
         if allowed.size == 0:
@@ -249,21 +303,53 @@ class ParallelIMH(IMH):
         batch = points[allowed]
         seeds = self._seeds.spawn(len(batch) * self._likelihood.n_nodes)
         tasks = self._likelihood.tasks(batch, seeds)
-        outcomes = [
-            crash_outcome(result) if isinstance(result, WorkerCrash) else result
-            for result in self.executor.map(partial(_simulate, self._likelihood.functions), tasks)
+        keys = [
+            _simulation_key(batch[number % len(batch)], task[0], task[1])
+            for number, task in enumerate(tasks)
         ]
-        for outcome in outcomes:
-            if not outcome.ok:
-                self.failure_kinds[outcome.status] += 1
+        records: list[LikelihoodRecord | None] = [self._finished.get(key) for key in keys]
+        todo = [number for number, record in enumerate(records) if record is None]
+        chunks = self.executor.imap_chunks(
+            partial(_simulate, self._likelihood.functions), (tasks[number] for number in todo)
+        )
+        try:
+            for chunk in chunks:
+                finished = []
+                for position, result in chunk:
+                    number = todo[position]
+                    outcome = crash_outcome(result) if isinstance(result, WorkerCrash) else result
+                    term = self._likelihood.term(
+                        tasks[number][0], batch[number % len(batch)], outcome
+                    )
+                    finished.append(
+                        LikelihoodRecord(
+                            keys[number], term, outcome.status, outcome.reason, outcome.elapsed
+                        )
+                    )
+                    records[number] = finished[-1]
+                if self.checkpoint is not None:
+                    self.checkpoint.append(finished)
+                    self._finished.update((record.key, record) for record in finished)
+        finally:
+            chunks.close()
+        for record in records:
+            if record.status != OK:
+                self.failure_kinds[record.status] += 1
                 if len(self.failure_reasons) < _MAX_REASONS:
-                    self.failure_reasons.append(f"{outcome.status}: {outcome.reason}")
-        failures = sum(not outcome.ok for outcome in outcomes)
-        self._stage_simulations += len(tasks)
+                    self.failure_reasons.append(f"{record.status}: {record.reason}")
+        failures = sum(record.status != OK for record in records)
+        resumed = len(tasks) - len(todo)
+        self._stage_simulations += len(todo)
+        self._stage_resumed += resumed
         self._stage_failures += failures
-        self.total_simulations += len(tasks)
+        self.total_simulations += len(todo)
+        self.total_resumed += resumed
         self.total_failures += failures
-        loglik[allowed] = self._likelihood.evaluate(batch, outcomes)
+        loglik[allowed] = self._likelihood.evaluate(
+            batch,
+            np.array([record.loglik for record in records]),
+            np.array([record.status == OK for record in records]),
+        )
         return loglik
 
     def _initialize_kernel(self) -> None:
@@ -323,10 +409,12 @@ class ParallelIMH(IMH):
             **super().sample_stats(),
             "simulations": self._stage_simulations,
             "failed_simulations": self._stage_failures,
+            "resumed_simulations": self._stage_resumed,
             "stage_seconds": now - self._stage_start,
         }
         self._stage_simulations = 0
         self._stage_failures = 0
+        self._stage_resumed = 0
         self._stage_start = now
         return stats
 
@@ -335,10 +423,52 @@ class ParallelIMH(IMH):
             **super().sample_settings(),
             "n_simulations": self.total_simulations,
             "n_failed_simulations": self.total_failures,
+            "n_resumed_simulations": self.total_resumed,
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
             "failure_examples": " | ".join(self.failure_reasons),
             "executor": repr(self.executor),
         }
+
+
+def _graph_digest(variables: Sequence) -> str:
+    """Digest of the graphs computing ``variables``: their operations and constants."""
+    digest = hashlib.sha256()
+    for variable in ancestors(variables):
+        if isinstance(variable, Constant):
+            data = np.asarray(variable.data)
+            digest.update(str(data).encode() if data.dtype == object else data.tobytes())
+        elif variable.owner is not None:
+            digest.update(str(variable.owner.op).encode())
+    return digest.hexdigest()
+
+
+def _describe(function: Callable[..., Any]) -> str:
+    target = function.simulator if isinstance(function, SimulatorFunction) else function
+    target = getattr(target, "func", target)  # functools.partial
+    name = getattr(target, "__qualname__", type(target).__qualname__)
+    return f"{getattr(target, '__module__', '')}.{name}"
+
+
+def _run_settings(
+    model: Model, draws: int, chains: int, threshold: float, correlation: float
+) -> dict[str, Any]:
+    """What a resumed run must share with the checkpointed one (besides the seed)."""
+    nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
+    return {
+        "sampler": "smc_abc",
+        "draws": int(draws),
+        "chains": int(chains),
+        "threshold": float(threshold),
+        "correlation_threshold": float(correlation),
+        "parameters": [rv.name for rv in model.free_RVs],
+        "prior_digest": _graph_digest(model.free_RVs),
+        "observed_digest": _graph_digest([model.rvs_to_values[rv] for rv in model.observed_RVs]),
+        "epsilon": [
+            float(getattr(rv.owner.op.epsilon, "data", rv.owner.op.epsilon)) for rv in nodes
+        ],
+        "simulator": [_describe(type(rv.owner.op).fn) for rv in nodes],
+        "likelihood_digest": _graph_digest(model.observed_RVs + model.potentials),
+    }
 
 
 def sample_smc_abc(
@@ -348,6 +478,7 @@ def sample_smc_abc(
     n_workers: int | None = None,
     chains: int = 1,
     random_seed: Any = None,
+    checkpoint: str | Path | None = None,
     model: Model | None = None,
     threshold: float = 0.5,
     correlation_threshold: float = 0.01,
@@ -365,7 +496,13 @@ def sample_smc_abc(
         n_workers: workers of an executor opened here (default: every core).
         chains: independent SMC runs, one after another, each using the whole executor
             (default 1: see the module docstring for why).
-        random_seed: seeds everything (proposals, resampling and every simulation).
+        random_seed: seeds everything (proposals, resampling and every simulation); an
+            integer (or None) with a checkpoint.
+        checkpoint: SQLite file persisting each finished simulation's log-likelihood term; a
+            run started again with the same arguments (and seed) resumes there and runs no
+            finished simulation again. A run with other settings is refused
+            (:class:`~pymc_vcc.store.CheckpointMismatchError` naming them). Without
+            ``random_seed``, the seed is drawn once and kept in the checkpoint.
         model: the PyMC model (default: the current context).
         threshold, correlation_threshold: as for ``pm.sample_smc``'s IMH kernel.
         progressbar: show PyMC's progress bar.
@@ -380,22 +517,42 @@ def sample_smc_abc(
     if int(draws) != draws or draws < 2:
         raise ValueError(f"draws must be an integer >= 2, got {draws}")
     kwargs.setdefault("compute_convergence_checks", chains > 1)
-    with executor_scope(executor, n_workers) as opened, warnings.catch_warnings():
-        # The distance kernel is a Python Op by design: the simulations run outside PyTensor.
-        warnings.filterwarnings("ignore", "Numba will use object mode", UserWarning)
-        return pm.sample_smc(
-            draws=int(draws),
-            kernel=ParallelIMH,
-            chains=int(chains),
-            cores=1,
-            random_seed=random_seed,
-            model=modelcontext(model),
-            progressbar=progressbar,
-            executor=opened,
-            threshold=threshold,
-            correlation_threshold=correlation_threshold,
-            **kwargs,
-        )
+    model = modelcontext(model)
+    store = None
+    if checkpoint is not None:
+        if random_seed is not None and (
+            isinstance(random_seed, bool)
+            or not isinstance(random_seed, int | np.integer)
+            or random_seed < 0
+        ):
+            raise ValueError(
+                f"random_seed must be a non-negative integer or None with a checkpoint, got "
+                f"{random_seed!r}"
+            )
+        settings = _run_settings(model, draws, chains, threshold, correlation_threshold)
+        store = LikelihoodStore(checkpoint, settings, random_seed)
+        random_seed = store.entropy
+    try:
+        with executor_scope(executor, n_workers) as opened, warnings.catch_warnings():
+            # The distance kernel is a Python Op by design: the simulations run outside PyTensor.
+            warnings.filterwarnings("ignore", "Numba will use object mode", UserWarning)
+            return pm.sample_smc(
+                draws=int(draws),
+                kernel=ParallelIMH,
+                chains=int(chains),
+                cores=1,
+                random_seed=random_seed,
+                model=model,
+                progressbar=progressbar,
+                executor=opened,
+                checkpoint=store,
+                threshold=threshold,
+                correlation_threshold=correlation_threshold,
+                **kwargs,
+            )
+    finally:
+        if store is not None:
+            store.close()
 
 
 __all__ = ["ParallelIMH", "sample_smc_abc"]

@@ -39,7 +39,8 @@ class LeakResult:
         table: Table II, one row per dataset: reference_kg, mean_kg, sd_kg, p_leak.
         trees: the posterior DataTree of each dataset.
         sampler: ``"rejection"`` or ``"smc"``.
-        n_simulations: forward simulations run in all.
+        n_simulations: forward simulations the posteriors rest on (run, or resumed from
+            checkpoints).
         wall_seconds: wall time of the whole study, s.
         alarm_threshold_kg: charge below which the alarm counts a leak, kg.
     """
@@ -121,9 +122,11 @@ def _calibrate(
             settings.work.smc_draws,
             executor=executor,
             random_seed=int(seed.generate_state(1)[0]),
+            checkpoint=settings.checkpoint(f"leak_smc_{stage}"),
             progressbar=bool(settings.progress),
         )
-    return tree, int(tree["sample_stats"]["simulations"].sum())
+    stats = tree["sample_stats"]
+    return tree, int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
 
 
 def leak_study(
