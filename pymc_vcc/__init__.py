@@ -31,6 +31,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.abc": ("abc_rejection", "TooManyFailuresError"),
     "pymc_vcc.sequential": ("sequential_calibration", "SequentialResult"),
     "pymc_vcc.executors": ("make_executor", "Executor", "WorkerCrash"),
+    "pymc_vcc.store": ("CheckpointMismatchError",),
     "pymc_vcc.pymc_model": ("add_simulator", "gmm_prior_variable"),
     "pymc_vcc.smc": ("sample_smc_abc", "ParallelIMH"),
     "pymc_vcc.predictive": ("sample_posterior_predictive",),
