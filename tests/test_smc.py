@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import logging
-import warnings
-
 import numpy as np
 import pymc as pm
 import pytest
@@ -19,12 +16,7 @@ from pymc_vcc.testing import Flaky, GaussianLocation, LinearGaussian, ShiftedPro
 QUIET = {"progressbar": False}
 
 
-@pytest.fixture(autouse=True)
-def _quiet_pymc(caplog):
-    caplog.set_level(logging.WARNING, logger="pymc")
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Numba will use object mode")
-        yield
+pytestmark = pytest.mark.usefixtures("quiet_pymc")
 
 
 def shifted_profile_abc_moments(sim: ShiftedProfile, x_obs: float, epsilon: float):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import os
 import signal
 import sqlite3
@@ -10,7 +9,6 @@ import subprocess
 import sys
 import textwrap
 import time
-import warnings
 
 import numpy as np
 import pymc as pm
@@ -61,12 +59,7 @@ RUN_SCRIPT = textwrap.dedent(
 )
 
 
-@pytest.fixture(autouse=True)
-def _quiet_pymc(caplog):
-    caplog.set_level(logging.WARNING, logger="pymc")
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Numba will use object mode")
-        yield
+pytestmark = pytest.mark.usefixtures("quiet_pymc")
 
 
 def _run(simulator=MODEL, observed=OBSERVED, epsilon=0.5, **options):
