@@ -39,65 +39,22 @@ import hashlib
 import logging
 import multiprocessing
 import os
-import signal
 import time
-import traceback
 from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent import futures
-from contextlib import contextmanager, suppress
-from dataclasses import dataclass, field
+from contextlib import contextmanager
+from dataclasses import dataclass
 from itertools import islice
-from multiprocessing import connection as mp_connection
-from multiprocessing import util as mp_util
-from multiprocessing.connection import Connection
-from multiprocessing.context import BaseContext
-from multiprocessing.process import BaseProcess
-from multiprocessing.reduction import ForkingPickler
 from typing import Any, ClassVar, Literal
 
 import cloudpickle
 
+from pymc_vcc.worker_pool import WorkerCrash, WorkerDiedError, WorkerPool, run_chunk
+
 ExecutorKind = Literal["serial", "processes", "dask"]
 EXECUTOR_KINDS: tuple[str, ...] = ("serial", "processes", "dask")
-
-_FUNCTION_CACHE: dict[str, Callable[..., Any]] = {}
-_FUNCTION_CACHE_SIZE = 4
-_STOP_SECONDS = 5.0
-_AHEAD_BYTES = 4096  # a chunk message this small may wait in a busy worker's pipe (never blocks)
-
-
-@dataclass(frozen=True, slots=True)
-class WorkerCrash:
-    """Stands in for the result of an item whose run killed the worker process running it.
-
-    Attributes:
-        reason: what happened, e.g. ``"worker process died (exit code -11 / signal SIGSEGV)"``.
-        elapsed: wall time from the start of the item's lone run to the death, s (0 if unknown).
-    """
-
-    reason: str
-    elapsed: float = 0.0
-
-
-class _WorkerDiedError(Exception):
-    """Set on the future of a chunk whose worker process died while running it."""
-
-    def __init__(self, crash: WorkerCrash) -> None:
-        super().__init__(crash.reason)
-        self.crash = crash
-
-
-class _RemoteTraceback(Exception):
-    """The traceback of an exception raised in a worker process, shown as its cause."""
-
-    def __init__(self, text: str) -> None:
-        super().__init__(text)
-        self.text = text
-
-    def __str__(self) -> str:
-        return f'\n"""\n{self.text}"""'
 
 
 def available_cores() -> int:
@@ -106,235 +63,6 @@ def available_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # platforms without sched_getaffinity
         return os.cpu_count() or 1
-
-
-def _load_function(token: str, payload: bytes) -> Callable[..., Any]:
-    function = _FUNCTION_CACHE.get(token)
-    if function is None:
-        function = cloudpickle.loads(payload)
-        if len(_FUNCTION_CACHE) >= _FUNCTION_CACHE_SIZE:
-            _FUNCTION_CACHE.pop(next(iter(_FUNCTION_CACHE)))
-        _FUNCTION_CACHE[token] = function
-    return function
-
-
-def _run_chunk(token: str, payload: bytes, values: list, batched: bool) -> tuple[list, float]:
-    """Worker side: apply the function to one chunk; returns (results, seconds spent)."""
-    function = _load_function(token, payload)
-    start = time.perf_counter()
-    results = function(values) if batched else [function(value) for value in values]
-    return list(results), time.perf_counter() - start
-
-
-def _worker_main(connection: Connection) -> None:
-    """A local worker process: run the chunks received on ``connection`` until told to stop.
-
-    Replies ``(True, (results, seconds))`` or ``(False, exception, traceback text)``. Ctrl-C is
-    left to the parent, which stops the workers; a ``SystemExit`` ends the worker like a crash.
-    """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    while True:
-        try:
-            job = connection.recv()
-        except EOFError:  # the parent has gone
-            return
-        if job is None:
-            return
-        try:
-            reply: tuple = (True, _run_chunk(*job))
-        except Exception as error:
-            reply = (False, error, traceback.format_exc())
-        try:
-            connection.send(reply)
-        except Exception as error:  # results or exception that cannot be pickled
-            message = f"the worker could not send its reply back: {type(error).__name__}: {error}"
-            connection.send((False, RuntimeError(message), traceback.format_exc()))
-
-
-def _death_reason(exit_code: int | None) -> str:
-    if exit_code is not None and exit_code < 0:
-        try:
-            name = signal.Signals(-exit_code).name
-        except ValueError:
-            name = f"signal {-exit_code}"
-        hint = "; e.g. the out-of-memory killer" if -exit_code == signal.SIGKILL else ""
-        return f"worker process died (exit code {exit_code} / signal {name}{hint})"
-    return f"worker process died (exit code {exit_code})"
-
-
-@dataclass
-class _Job:
-    future: futures.Future
-    message: tuple
-    data: bytes | None = None  # the pickled message, once taken from the queue
-    started: float = 0.0
-
-
-@dataclass
-class _Worker:
-    process: BaseProcess
-    connection: Connection
-    jobs: deque[_Job] = field(default_factory=deque)  # sent, in order: the first one runs
-
-
-def _stop_workers(workers: list[_Worker]) -> None:
-    """Stop idle workers politely and busy ones (whose results nobody awaits) at once."""
-    for worker in workers:
-        if worker.jobs:
-            worker.process.terminate()
-        else:
-            with suppress(OSError):
-                worker.connection.send(None)
-    deadline = time.monotonic() + _STOP_SECONDS
-    for worker in workers:
-        worker.process.join(max(deadline - time.monotonic(), 0.0))
-        if worker.process.exitcode is None:
-            worker.process.kill()
-            worker.process.join()
-        worker.connection.close()
-    workers.clear()
-
-
-class _WorkerPool:
-    """Local worker processes, each with its own pipe, driven from the calling thread.
-
-    Each worker runs the chunks sent to it in order, and may hold one small chunk ahead (so
-    that it never waits for the caller between chunks); knowing which chunk each worker runs
-    pins a worker's death on that chunk alone, the chunk queued behind it goes back to the
-    queue, and a new worker takes the dead one's place. No background thread: queued chunks go
-    to workers whenever the caller submits or waits.
-    """
-
-    def __init__(self, context: BaseContext, n_workers: int) -> None:
-        self._context = context
-        self._workers: list[_Worker] = []
-        self._queue: deque[_Job] = deque()
-        self._finalizer = mp_util.Finalize(
-            self, _stop_workers, args=(self._workers,), exitpriority=10
-        )
-        for _ in range(n_workers):
-            self._workers.append(self._start_worker())
-
-    def _start_worker(self) -> _Worker:
-        parent_end, child_end = self._context.Pipe(duplex=True)
-        process = self._context.Process(
-            target=_worker_main, args=(child_end,), name="pymc_vcc-worker"
-        )
-        process.start()
-        child_end.close()
-        return _Worker(process, parent_end)
-
-    def _replace(self, worker: _Worker) -> None:
-        """Start a new process in place of ``worker``'s dead one; fail the chunk it was running."""
-        while worker.jobs and worker.connection.poll():  # replies sent before it died count
-            if not self._receive_reply(worker):
-                break
-        worker.process.join(_STOP_SECONDS)
-        if worker.process.exitcode is None:  # its pipe broke, yet it runs: end it
-            worker.process.kill()
-            worker.process.join()
-        reason = _death_reason(worker.process.exitcode)
-        worker.connection.close()
-        jobs = worker.jobs
-        new = self._start_worker()
-        worker.process, worker.connection, worker.jobs = new.process, new.connection, deque()
-        if jobs:
-            running = jobs.popleft()
-            elapsed = time.perf_counter() - running.started
-            running.future.set_exception(_WorkerDiedError(WorkerCrash(reason, elapsed)))
-            self._queue.extendleft(reversed(jobs))  # never started: queued again, first
-
-    def submit(self, message: tuple) -> futures.Future:
-        """Queue a chunk ``(token, payload, values, batched)``; its future gets the reply."""
-        job = _Job(futures.Future(), message)
-        self._queue.append(job)
-        self._dispatch()
-        return job.future
-
-    def _take(self, ahead: bool) -> _Job | None:
-        """The next queued chunk to send (None if none, or if it is too big to wait ahead)."""
-        while self._queue:
-            job = self._queue[0]
-            if job.data is None:
-                if not job.future.set_running_or_notify_cancel():
-                    self._queue.popleft()
-                    continue
-                try:
-                    job.data = bytes(ForkingPickler.dumps(job.message))
-                except Exception as error:  # e.g. items that cannot be pickled
-                    self._queue.popleft()
-                    job.future.set_exception(error)
-                    continue
-            if ahead and len(job.data) > _AHEAD_BYTES:
-                return None
-            return self._queue.popleft()
-        return None
-
-    def _dispatch(self) -> None:
-        """Give every idle worker a chunk, then each busy one a small chunk to hold ahead."""
-        while self._queue:
-            worker = min(self._workers, key=lambda candidate: len(candidate.jobs))
-            if len(worker.jobs) > 1:
-                return
-            job = self._take(ahead=bool(worker.jobs))
-            if job is None:
-                return
-            try:
-                worker.connection.send_bytes(job.data)
-            except (BrokenPipeError, ConnectionResetError):  # the worker has died
-                self._queue.appendleft(job)
-                self._replace(worker)
-                continue
-            if not worker.jobs:
-                job.started = time.perf_counter()
-            worker.jobs.append(job)
-
-    def _receive_reply(self, worker: _Worker) -> bool:
-        """Read the reply to ``worker``'s running chunk; False if the worker has gone."""
-        try:
-            reply = worker.connection.recv()
-        except (EOFError, OSError):
-            return False
-        except Exception as error:  # a reply this process cannot unpickle
-            reply = (False, error, traceback.format_exc())
-        job = worker.jobs.popleft()
-        if worker.jobs:
-            worker.jobs[0].started = time.perf_counter()
-        if reply[0]:
-            job.future.set_result(reply[1])
-        else:
-            error = reply[1]
-            error.__cause__ = _RemoteTraceback(reply[2])
-            job.future.set_exception(error)
-        return True
-
-    def wait_first(self, pending: list[futures.Future]) -> list[futures.Future]:
-        """Block until at least one of ``pending`` is done; return the done ones."""
-        self._dispatch()
-        while True:
-            done = [future for future in pending if future.done()]
-            if done:
-                return done
-            busy = [worker for worker in self._workers if worker.jobs]
-            if not busy:
-                raise RuntimeError("waiting for chunks that were never submitted to this pool")
-            handles = [worker.connection for worker in busy]
-            handles += [worker.process.sentinel for worker in busy]
-            ready = set(mp_connection.wait(handles))
-            for worker in busy:
-                if worker.connection in ready:
-                    if not self._receive_reply(worker):
-                        self._replace(worker)
-                elif worker.process.sentinel in ready:
-                    self._replace(worker)
-            self._dispatch()  # feed freed workers before the caller handles the results
-
-    def close(self) -> None:
-        """Stop every worker (busy ones at once) and cancel queued chunks."""
-        for job in self._queue:
-            job.future.cancel()
-        self._queue.clear()
-        self._finalizer()
 
 
 class _ChunkSizer:
@@ -572,7 +300,7 @@ class ProcessExecutor(_PickledFunctionExecutor):
             raise ValueError(f"n_workers must be >= 1, got {self.n_workers}")
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["numpy", "xarray", "pymc_vcc.executors"])
-        self._pool = _WorkerPool(context, self.n_workers)
+        self._pool = WorkerPool(context, self.n_workers)
 
     def _prepare(self, fn: Callable[..., Any]) -> tuple[str, bytes]:
         return self._serialise(fn)
@@ -586,7 +314,7 @@ class ProcessExecutor(_PickledFunctionExecutor):
 
     def _crash(self, future: futures.Future) -> WorkerCrash | None:
         error = future.exception()
-        return error.crash if isinstance(error, _WorkerDiedError) else None
+        return error.crash if isinstance(error, WorkerDiedError) else None
 
     def close(self) -> None:
         self._pool.close()
@@ -655,7 +383,7 @@ class DaskExecutor(_PickledFunctionExecutor):
         if handle.data is not None and handle.data.status != "finished":
             handle.data = None
         payload = handle.payload if handle.data is None else handle.data
-        return self._client.submit(_run_chunk, handle.token, payload, values, batched, pure=False)
+        return self._client.submit(run_chunk, handle.token, payload, values, batched, pure=False)
 
     def _wait_first(self, pending: list) -> Iterable[Any]:
         from distributed import wait
