@@ -53,9 +53,9 @@ def _leak(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from pymc_vcc.demo import run_demo
+    from pymc_vcc.refrigerant.diagram import save_property_diagram
 
-    run_demo(Path(args.out))
+    save_property_diagram(Path(args.out))
     return _leak(args)
 
 

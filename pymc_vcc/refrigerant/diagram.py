@@ -1,12 +1,8 @@
-"""``pymc-vcc demo``: R410A property tables against CoolProp, a p–h diagram and error maps."""
+"""Property tables against CoolProp: a p–h diagram and error maps (part of ``pymc-vcc demo``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
-
-import matplotlib
-
-matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -72,7 +68,7 @@ def _error_map(
     bar.ax.axhline(tolerance, color="C3", lw=2)
 
 
-def run_demo(out: Path, n_points: int = 2000) -> Path:
+def save_property_diagram(out: Path, n_points: int = 2000) -> Path:
     """Build or load the R410A tables, compare them with CoolProp HEOS at ``n_points`` random
     states, print the largest errors and save ``out/refrigerant_R410A.png``; returns its path."""
     import CoolProp.CoolProp as CP

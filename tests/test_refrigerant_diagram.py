@@ -1,12 +1,12 @@
-"""``run_demo`` compares the R410A tables with CoolProp and saves a p–h diagram."""
+"""``save_property_diagram`` compares the R410A tables with CoolProp and saves a p–h diagram."""
 
-from pymc_vcc.demo import run_demo
 from pymc_vcc.refrigerant.cache import CACHE_ENV
+from pymc_vcc.refrigerant.diagram import save_property_diagram
 
 
-def test_run_demo_writes_the_diagram_and_prints_the_errors(tmp_path, monkeypatch, capsys):
+def test_property_diagram_writes_the_diagram_and_prints_the_errors(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
-    path = run_demo(tmp_path / "demo", n_points=150)
+    path = save_property_diagram(tmp_path / "demo", n_points=150)
     assert path == tmp_path / "demo" / "refrigerant_R410A.png"
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert path.stat().st_size > 50_000
