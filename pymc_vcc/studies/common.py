@@ -40,7 +40,7 @@ class Budget:
 BUDGETS: dict[str, Budget] = {
     budget.name: budget
     for budget in (
-        Budget("smoke", 8, 0.25, 32, 3, smc_draws=8, sobol_base=2, predictive_draws=4),
+        Budget("smoke", 16, 0.25, 32, 3, smc_draws=8, sobol_base=2, predictive_draws=4),
         Budget("small", 100, 0.1, 400, 40, smc_draws=64, sobol_base=32, predictive_draws=50),
         Budget(
             "paper", 5000, 0.05, 80000, 4000, smc_draws=2000, sobol_base=10000, predictive_draws=500
