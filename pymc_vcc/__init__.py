@@ -2,7 +2,8 @@
 
 The public API is re-exported here and imported lazily on first use, so that worker processes
 which only simulate never pay for importing PyMC. The function ``simulate`` lives in the
-module of the same name: ``from pymc_vcc.simulate import simulate``. See the README for a tour.
+module of the same name: ``from pymc_vcc.physics.simulate import simulate``. See the README for a
+tour.
 """
 
 from __future__ import annotations
@@ -13,29 +14,29 @@ from typing import Any
 __version__ = "0.1.0"
 
 _EXPORTS: dict[str, tuple[str, ...]] = {
-    "pymc_vcc.refrigerant": ("load_refrigerant", "Refrigerant", "SUPPORTED_FLUIDS"),
-    "pymc_vcc.unit": ("load_unit", "Unit"),
-    "pymc_vcc.parameters": ("PARAMETER_IDS", "ParameterSpec", "ParameterTable"),
-    "pymc_vcc.inputs": (
+    "pymc_vcc.physics.refrigerant": ("load_refrigerant", "Refrigerant", "SUPPORTED_FLUIDS"),
+    "pymc_vcc.physics.unit": ("load_unit", "Unit"),
+    "pymc_vcc.physics.parameters": ("PARAMETER_IDS", "ParameterSpec", "ParameterTable"),
+    "pymc_vcc.physics.inputs": (
         "INPUT_IDS",
         "builtin_inputs",
         "constant_inputs",
         "load_inputs_csv",
         "make_inputs",
     ),
-    "pymc_vcc.cycle": ("OUTPUT_IDS",),
-    "pymc_vcc.simulate": ("VCCSimulator", "operating_point"),
-    "pymc_vcc.measurements": ("load_measurements", "Measurements", "example_log_path"),
-    "pymc_vcc.distances": ("ks_distance", "ks_distances"),
-    "pymc_vcc.priors": ("Prior", "UniformPrior", "GMMPrior", "load_prior"),
-    "pymc_vcc.abc": ("abc_rejection", "TooManyFailuresError"),
-    "pymc_vcc.sequential": ("sequential_calibration", "SequentialResult"),
-    "pymc_vcc.executors": ("make_executor", "Executor", "WorkerCrash"),
-    "pymc_vcc.store": ("CheckpointMismatchError",),
-    "pymc_vcc.pymc_model": ("add_simulator", "gmm_prior_variable"),
-    "pymc_vcc.smc": ("sample_smc_abc", "ParallelIMH"),
-    "pymc_vcc.predictive": ("sample_posterior_predictive",),
-    "pymc_vcc.sensitivity": ("sobol_indices",),
+    "pymc_vcc.physics.cycle": ("OUTPUT_IDS",),
+    "pymc_vcc.physics.simulate": ("VCCSimulator", "operating_point"),
+    "pymc_vcc.io.measurements": ("load_measurements", "Measurements", "example_log_path"),
+    "pymc_vcc.inference.distances": ("ks_distance", "ks_distances"),
+    "pymc_vcc.inference.priors": ("Prior", "UniformPrior", "GMMPrior", "load_prior"),
+    "pymc_vcc.inference.rejection": ("abc_rejection", "TooManyFailuresError"),
+    "pymc_vcc.inference.sequential": ("sequential_calibration", "SequentialResult"),
+    "pymc_vcc.execution.executors": ("make_executor", "Executor", "WorkerCrash"),
+    "pymc_vcc.execution.store": ("CheckpointMismatchError",),
+    "pymc_vcc.inference.pymc.model": ("add_simulator", "gmm_prior_variable"),
+    "pymc_vcc.inference.pymc.smc": ("sample_smc_abc", "ParallelIMH"),
+    "pymc_vcc.inference.predictive": ("sample_posterior_predictive",),
+    "pymc_vcc.inference.sensitivity": ("sobol_indices",),
     "pymc_vcc.studies": ("StudySettings", "leak_study", "estimation_study", "sobol_study"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}

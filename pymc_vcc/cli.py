@@ -9,7 +9,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from pymc_vcc.executors import EXECUTOR_KINDS
+from pymc_vcc.execution.executors import EXECUTOR_KINDS
 
 
 def _settings(args: argparse.Namespace):
@@ -53,7 +53,7 @@ def _leak(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from pymc_vcc.refrigerant.diagram import save_property_diagram
+    from pymc_vcc.physics.refrigerant.diagram import save_property_diagram
 
     save_property_diagram(Path(args.out))
     return _leak(args)

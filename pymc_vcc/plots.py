@@ -163,7 +163,8 @@ def plot_predictive(
     """Figs. 6 and 8: posterior predictive median and central band against the ground truth.
 
     Reads the ``predictive_bands`` group (and ``predictive_reference``, the truth, if present)
-    written by :func:`pymc_vcc.predictive.sample_posterior_predictive`; ``uncalibrated`` adds
+    written by :func:`pymc_vcc.inference.predictive.sample_posterior_predictive`; ``uncalibrated``
+    adds
     the outputs of an uncalibrated model (Fig. 8). The calibration window's end is dashed.
     """
     if "predictive_bands" not in tree.children:

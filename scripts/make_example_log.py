@@ -1,6 +1,7 @@
 """Write ``pymc_vcc/data/example_log.csv``: a synthetic field log of the built-in unit.
 
-The truth is :func:`pymc_vcc.simulate.simulate` of the built-in unit at nominal parameters on the
+The truth is :func:`pymc_vcc.physics.simulate.simulate` of the built-in unit at nominal parameters
+on the
 built-in step profile. The log covers 300 s to 1800 s of it (the unit already running), sampled
 every 1.5-3.5 s, with sensor noise, engineering units (°C, bar gauge, g/s, %, rpm), ISO
 timestamps, a logger outage of 80 s and a 45 s drop-out of the suction temperature sensor.
@@ -15,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pymc_vcc.inputs import builtin_inputs, input_segments
-from pymc_vcc.simulate import simulate
+from pymc_vcc.physics.inputs import builtin_inputs, input_segments
+from pymc_vcc.physics.simulate import simulate
 
 START, END = 300.0, 1800.0
 """The stretch of the truth the log covers, s."""

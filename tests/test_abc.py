@@ -13,9 +13,14 @@ import pytest
 import xarray as xr
 from scipy import stats
 
-from pymc_vcc.abc import SimulationTask, TooManyFailuresError, abc_rejection, simulation_rng
-from pymc_vcc.executors import make_executor
-from pymc_vcc.priors import GMMPrior, UniformPrior
+from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.inference.priors import GMMPrior, UniformPrior
+from pymc_vcc.inference.rejection import (
+    SimulationTask,
+    TooManyFailuresError,
+    abc_rejection,
+    simulation_rng,
+)
 from pymc_vcc.testing import AsDataset, Flaky, GaussianLocation, LinearGaussian, ShiftedProfile
 
 
@@ -249,7 +254,7 @@ def test_noise_scales_are_parameters_and_perturb_outputs_as_in_algorithm_1():
     nu = tree.prior["nu_y"].values
     assert (nu >= 0).all() and (nu <= 0.3).all() and nu.std() > 0.05
     # one simulation by hand: Y + ν·|Y|·Z with Z drawn after the simulator from its stream
-    from pymc_vcc.series import prepare_observed
+    from pymc_vcc.inference.series import prepare_observed
 
     data = prepare_observed(observed, output_names=model.output_names)
     task = SimulationTask(model, data, ("mu",), (0,), (1,), model.distance, 99, (), None)

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from pymc_vcc.abc import abc_rejection
-from pymc_vcc.executors import make_executor
-from pymc_vcc.priors import UniformPrior
-from pymc_vcc.store import CheckpointMismatchError
+from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.execution.store import CheckpointMismatchError
+from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.testing import GaussianLocation, Recording
 
 MODEL = GaussianLocation(n_time=20, low=-1.0, high=1.0)
@@ -31,8 +31,8 @@ RUN_SCRIPT = textwrap.dedent(
 
     import numpy as np
 
-    from pymc_vcc.abc import abc_rejection
-    from pymc_vcc.priors import UniformPrior
+    from pymc_vcc.inference.rejection import abc_rejection
+    from pymc_vcc.inference.priors import UniformPrior
     from pymc_vcc.testing import GaussianLocation, Recording, Slow
 
 

@@ -5,22 +5,28 @@ import math
 import numpy as np
 import pytest
 
-from pymc_vcc.components.compressor import (
+from pymc_vcc.physics.components.compressor import (
     compressor,
     compressor_mass_flow,
     protection_speed_factor,
     shaft_power,
     volumetric_efficiency,
 )
-from pymc_vcc.components.density import QUALITY_BAND, cell_state
-from pymc_vcc.components.expansion_valve import valve_mass_flow
-from pymc_vcc.components.fan import air_inlet_temperature, fan_operating_point
-from pymc_vcc.components.heat_exchanger import zone_derivatives
-from pymc_vcc.components.heat_transfer import LIQUID_BLEND, air_side_heat, refrigerant_htc
-from pymc_vcc.components.pipe import friction_coefficient, pipe_volume, pressure_drop
-from pymc_vcc.components.smooth import signed_sqrt, smooth_max, smooth_pos, smooth_step
-from pymc_vcc.components.suction_tank import tank_outlet_enthalpy
-from pymc_vcc.refrigerant import entropy, h_from_ps, load_refrigerant, saturation_state, state
+from pymc_vcc.physics.components.density import QUALITY_BAND, cell_state
+from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
+from pymc_vcc.physics.components.fan import air_inlet_temperature, fan_operating_point
+from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
+from pymc_vcc.physics.components.heat_transfer import LIQUID_BLEND, air_side_heat, refrigerant_htc
+from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
+from pymc_vcc.physics.components.smooth import signed_sqrt, smooth_max, smooth_pos, smooth_step
+from pymc_vcc.physics.components.suction_tank import tank_outlet_enthalpy
+from pymc_vcc.physics.refrigerant import (
+    entropy,
+    h_from_ps,
+    load_refrigerant,
+    saturation_state,
+    state,
+)
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pymc_vcc.cycle import (
+from pymc_vcc.physics.cycle import (
     C_KI,
     C_KP,
     C_M0,
@@ -16,8 +16,8 @@ from pymc_vcc.cycle import (
     state_slices,
     total_mass,
 )
-from pymc_vcc.refrigerant import load_refrigerant
-from pymc_vcc.unit import load_unit
+from pymc_vcc.physics.refrigerant import load_refrigerant
+from pymc_vcc.physics.unit import load_unit
 
 U_RATED = np.array([0.40, 55.0, 308.15, 300.15])
 

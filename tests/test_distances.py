@@ -5,7 +5,7 @@ import pytest
 import xarray as xr
 from scipy import stats
 
-from pymc_vcc.distances import ks_distance, ks_distances, ks_statistics
+from pymc_vcc.inference.distances import ks_distance, ks_distances, ks_statistics
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")  # scipy's p-value for tiny samples

@@ -14,9 +14,9 @@ import cloudpickle
 import numpy as np
 import pytest
 
-from pymc_vcc.abc import abc_rejection
-from pymc_vcc.executors import DaskExecutor, make_executor
-from pymc_vcc.priors import UniformPrior
+from pymc_vcc.execution.executors import DaskExecutor, make_executor
+from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.testing import Flaky, GaussianLocation
 
 LOCAL_KINDS = ["serial", "processes"]

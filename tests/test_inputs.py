@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pymc_vcc.inputs import (
+from pymc_vcc.physics.inputs import (
     INPUT_IDS,
     builtin_inputs,
     constant_inputs,
@@ -85,7 +85,7 @@ def test_dataset_validation_checks_units():
         100.0, valve_opening=0.4, compressor_speed=55.0, T_ambient=308.15, T_indoor=300.15
     )
     inputs.T_indoor.attrs["units"] = "degC"
-    from pymc_vcc.inputs import validate_inputs
+    from pymc_vcc.physics.inputs import validate_inputs
 
     with pytest.raises(ValueError, match="T_indoor must have units 'K'"):
         validate_inputs(inputs)

@@ -7,14 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pymc_vcc.measurements import (
+from pymc_vcc.io.measurements import (
     EXAMPLE_COLUMNS,
     EXAMPLE_UNITS,
     example_log_path,
     load_measurements,
     unit_converter,
 )
-from pymc_vcc.simulate import VCCSimulator, simulate
+from pymc_vcc.physics.simulate import VCCSimulator, simulate
 
 LOG_START = 300.0
 """Truth time of the example log's first row (scripts/make_example_log.py)."""
@@ -55,7 +55,7 @@ def test_example_log_recovers_the_inputs(example, truth):
     time = inputs["time"].values
     assert time[0] == 0.0
     assert np.all(np.diff(time[:-1]) == 10.0)
-    from pymc_vcc.inputs import builtin_inputs, input_segments
+    from pymc_vcc.physics.inputs import builtin_inputs, input_segments
 
     edges, held = input_segments(builtin_inputs())
     index = np.searchsorted(edges, time[:-1] + LOG_START, side="right") - 1

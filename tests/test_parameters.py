@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from pymc_vcc.parameters import PARAMETER_IDS, ParameterSpec, parameter_table
-from pymc_vcc.unit import load_unit
+from pymc_vcc.physics.parameters import PARAMETER_IDS, ParameterSpec, parameter_table
+from pymc_vcc.physics.unit import load_unit
 
 
 def test_table_iii_has_26_unique_ids_starting_with_charge():

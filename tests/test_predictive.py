@@ -9,9 +9,9 @@ import pymc as pm
 import pytest
 import xarray as xr
 
-from pymc_vcc.predictive import sample_posterior_predictive
-from pymc_vcc.pymc_model import add_simulator
-from pymc_vcc.smc import sample_smc_abc
+from pymc_vcc.inference.predictive import sample_posterior_predictive
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.testing import AsDataset, Flaky, GaussianLocation, LinearGaussian
 
 
@@ -124,7 +124,7 @@ def test_smc_posterior_predicts_a_longer_profile():
 
 
 def test_vcc_predictive_keeps_time_and_units_of_the_simulator():
-    from pymc_vcc.simulate import VCCSimulator
+    from pymc_vcc.physics.simulate import VCCSimulator
 
     sim = VCCSimulator(t_window=(20.0, 300.0), outputs=["PD", "TS", "MDOT"])
     truth = sim({"M0": 1.5})

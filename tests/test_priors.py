@@ -7,7 +7,7 @@ from scipy import stats
 from scipy.integrate import trapezoid
 from scipy.special import expit, logit
 
-from pymc_vcc.priors import GMMPrior, UniformPrior, load_prior, validate_bounds
+from pymc_vcc.inference.priors import GMMPrior, UniformPrior, load_prior, validate_bounds
 
 BOUNDS = {"M0": (0.9, 2.2), "CF_VOL": (0.5, 1.5)}
 

@@ -10,9 +10,9 @@ import pytest
 from scipy import stats
 from scipy.special import expit
 
-from pymc_vcc.distances import ks_distance
-from pymc_vcc.priors import GMMPrior, UniformPrior
-from pymc_vcc.pymc_model import (
+from pymc_vcc.inference.distances import ks_distance
+from pymc_vcc.inference.priors import GMMPrior, UniformPrior
+from pymc_vcc.inference.pymc.model import (
     DistanceKernel,
     SimulatorFunction,
     add_simulator,
@@ -20,8 +20,8 @@ from pymc_vcc.pymc_model import (
     prior_variables,
     simulator_bounds,
 )
-from pymc_vcc.series import prepare_observed
-from pymc_vcc.simulate import VCCSimulator
+from pymc_vcc.inference.series import prepare_observed
+from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.testing import Flaky, GaussianLocation, ShiftedProfile
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from pymc_vcc.refrigerant import (
+from pymc_vcc.physics.refrigerant import (
     SUPPORTED_FLUIDS,
     TableResolution,
     entropy,
@@ -19,7 +19,7 @@ from pymc_vcc.refrigerant import (
     state,
     state_array,
 )
-from pymc_vcc.refrigerant.cache import CACHE_ENV, cache_directory, load_tables
+from pymc_vcc.physics.refrigerant.cache import CACHE_ENV, cache_directory, load_tables
 
 FLUIDS = ("R410A", "R32", "R134a")
 T_TOLERANCE = 0.05  # K
@@ -346,7 +346,7 @@ def test_cache_build_then_reload_gives_identical_tables(tmp_path, monkeypatch):
     for name, value in built.tables._asdict().items():
         np.testing.assert_array_equal(getattr(reloaded, name), value)
     # another process (no in-memory copy) gets the same tables from the file
-    from pymc_vcc.refrigerant.fluid import Refrigerant
+    from pymc_vcc.physics.refrigerant.fluid import Refrigerant
 
     again = Refrigerant("R134a", reloaded)
     p, h = random_states(built, 50, np.random.default_rng(5))

@@ -1,7 +1,7 @@
 """``save_property_diagram`` compares the R410A tables with CoolProp and saves a p–h diagram."""
 
-from pymc_vcc.refrigerant.cache import CACHE_ENV
-from pymc_vcc.refrigerant.diagram import save_property_diagram
+from pymc_vcc.physics.refrigerant.cache import CACHE_ENV
+from pymc_vcc.physics.refrigerant.diagram import save_property_diagram
 
 
 def test_property_diagram_writes_the_diagram_and_prints_the_errors(tmp_path, monkeypatch, capsys):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from pymc_vcc.sensitivity import WindowMean, sobol_indices
+from pymc_vcc.inference.sensitivity import WindowMean, sobol_indices
 
 A, B = 7.0, 0.1
 BOUNDS = {name: (-np.pi, np.pi) for name in ("x1", "x2", "x3")}

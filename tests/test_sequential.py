@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from pymc_vcc.priors import GMMPrior, UniformPrior
-from pymc_vcc.sequential import SequentialResult, sequential_calibration
+from pymc_vcc.inference.priors import GMMPrior, UniformPrior
+from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.testing import GaussianLocation, Recording
 
 MODEL = GaussianLocation(n_time=20, sigma=1.0, low=-1.0, high=1.0)

@@ -6,10 +6,10 @@ import pickle
 import numpy as np
 import pytest
 
-from pymc_vcc.cycle import OUTPUT_IDS
-from pymc_vcc.inputs import builtin_inputs, constant_inputs
-from pymc_vcc.simulate import VCCSimulator, operating_point, simulate
-from pymc_vcc.unit import load_unit
+from pymc_vcc.physics.cycle import OUTPUT_IDS
+from pymc_vcc.physics.inputs import builtin_inputs, constant_inputs
+from pymc_vcc.physics.simulate import VCCSimulator, operating_point, simulate
+from pymc_vcc.physics.unit import load_unit
 
 RATED_CAPACITY = 3500.0  # W
 

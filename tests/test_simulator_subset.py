@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from pymc_vcc.pymc_model import simulator_bounds
-from pymc_vcc.simulate import VCCSimulator
+from pymc_vcc.inference.pymc.model import simulator_bounds
+from pymc_vcc.physics.simulate import VCCSimulator
 
 
 def test_subset_simulator_names_only_its_parameters_and_bounds():

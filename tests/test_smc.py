@@ -7,10 +7,10 @@ import pymc as pm
 import pytest
 from scipy import stats
 
-from pymc_vcc.executors import make_executor
-from pymc_vcc.priors import GMMPrior
-from pymc_vcc.pymc_model import add_simulator
-from pymc_vcc.smc import ParallelIMH, sample_smc_abc
+from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.inference.priors import GMMPrior
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import ParallelIMH, sample_smc_abc
 from pymc_vcc.testing import Flaky, GaussianLocation, LinearGaussian, ShiftedProfile
 
 QUIET = {"progressbar": False}
@@ -227,7 +227,7 @@ def test_kernel_needs_a_simulator_node_and_a_real_executor():
 
 @pytest.mark.slow
 def test_charge_calibration_on_the_vcc_simulator_recovers_the_true_charge():
-    from pymc_vcc.simulate import VCCSimulator
+    from pymc_vcc.physics.simulate import VCCSimulator
 
     # 230 s of the Fig. 4 profile (compressor step at 120 s), 30 particles, 2 workers.
     sim = VCCSimulator(t_window=(20.0, 250.0))

@@ -15,9 +15,9 @@ import pymc as pm
 import pytest
 import xarray as xr
 
-from pymc_vcc.pymc_model import add_simulator
-from pymc_vcc.smc import sample_smc_abc
-from pymc_vcc.store import CheckpointMismatchError
+from pymc_vcc.execution.store import CheckpointMismatchError
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.studies import StudySettings, leak_study
 from pymc_vcc.testing import Flaky, GaussianLocation, Recording
 
@@ -32,8 +32,8 @@ RUN_SCRIPT = textwrap.dedent(
     import numpy as np
     import pymc as pm
 
-    from pymc_vcc.pymc_model import add_simulator
-    from pymc_vcc.smc import sample_smc_abc
+    from pymc_vcc.inference.pymc.model import add_simulator
+    from pymc_vcc.inference.pymc.smc import sample_smc_abc
     from pymc_vcc.testing import GaussianLocation, Recording, Slow
 
 

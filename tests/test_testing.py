@@ -6,7 +6,7 @@ import xarray as xr
 from scipy import stats
 from scipy.integrate import trapezoid
 
-from pymc_vcc.distances import ks_distance
+from pymc_vcc.inference.distances import ks_distance
 from pymc_vcc.testing import (
     AsDataset,
     Flaky,

@@ -5,7 +5,7 @@ from importlib import resources
 
 import pytest
 
-from pymc_vcc.unit import BUILTIN_UNIT, load_unit, unit_from_dict, unit_to_dict
+from pymc_vcc.physics.unit import BUILTIN_UNIT, load_unit, unit_from_dict, unit_to_dict
 
 
 def _builtin_dict():

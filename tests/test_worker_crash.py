@@ -18,14 +18,14 @@ import pymc as pm
 import pytest
 import xarray as xr
 
-from pymc_vcc.abc import abc_rejection
-from pymc_vcc.executors import WorkerCrash, make_executor
-from pymc_vcc.outcomes import FAILURE_KINDS, WORKER_CRASH
-from pymc_vcc.predictive import sample_posterior_predictive
-from pymc_vcc.priors import UniformPrior
-from pymc_vcc.pymc_model import add_simulator
-from pymc_vcc.sensitivity import sobol_indices
-from pymc_vcc.smc import sample_smc_abc
+from pymc_vcc.execution.executors import WorkerCrash, make_executor
+from pymc_vcc.execution.outcomes import FAILURE_KINDS, WORKER_CRASH
+from pymc_vcc.inference.predictive import sample_posterior_predictive
+from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.inference.rejection import abc_rejection
+from pymc_vcc.inference.sensitivity import sobol_indices
 from pymc_vcc.testing import GaussianLocation
 
 SEGFAULTS = {37, 211}

@@ -12,10 +12,10 @@ from statistics import median
 import numpy as np
 from numba import njit
 
-from pymc_vcc.refrigerant import PropertyTables, load_refrigerant, state, state_array
-from pymc_vcc.refrigerant.cache import cache_directory, cache_path
-from pymc_vcc.refrigerant.fluid import DEFAULT_RESOLUTION, SUPPORTED_FLUIDS
-from pymc_vcc.refrigerant.validation import random_states
+from pymc_vcc.physics.refrigerant import PropertyTables, load_refrigerant, state, state_array
+from pymc_vcc.physics.refrigerant.cache import cache_directory, cache_path
+from pymc_vcc.physics.refrigerant.fluid import DEFAULT_RESOLUTION, SUPPORTED_FLUIDS
+from pymc_vcc.physics.refrigerant.validation import random_states
 
 N_CELLS = 15
 
@@ -61,7 +61,7 @@ def _heos_seconds_per_point(p: np.ndarray, h: np.ndarray, runs: int) -> float:
 
 def run(quick: bool) -> dict[str, float | int | str]:
     """Build time, cache size and per-point costs for R410A; ``quick`` uses fewer repetitions."""
-    from pymc_vcc.refrigerant.build import build_tables
+    from pymc_vcc.physics.refrigerant.build import build_tables
 
     runs = 3 if quick else 7
     spec = SUPPORTED_FLUIDS["R410A"]

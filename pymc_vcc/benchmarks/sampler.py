@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from pymc_vcc.abc import abc_rejection
-from pymc_vcc.executors import Executor, make_executor
-from pymc_vcc.priors import UniformPrior
+from pymc_vcc.execution.executors import Executor, make_executor
+from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.testing import GaussianLocation, Slow
 
 MODEL = GaussianLocation(n_time=10)

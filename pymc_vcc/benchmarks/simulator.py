@@ -16,8 +16,8 @@ from statistics import median
 
 import numpy as np
 
-from pymc_vcc.simulate import VCCSimulator
-from pymc_vcc.unit import load_unit
+from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.unit import load_unit
 
 T_WINDOW = (0.0, 1060.0)
 

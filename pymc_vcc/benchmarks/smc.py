@@ -2,7 +2,8 @@
 simulations SMC needs to match the rejection sampler's accuracy.
 
 Speed: a simulator that takes 50 ms per run (``testing.Slow``) on a deterministic problem, so
-that the stock serial IMH kernel and :class:`~pymc_vcc.smc.ParallelIMH` do exactly the same
+that the stock serial IMH kernel and :class:`~pymc_vcc.inference.pymc.smc.ParallelIMH` do exactly
+the same
 simulations from the same seed; stage wall times are compared (medians over stages), on 2 local
 worker processes and on a local Dask cluster of 2 workers. Twice: runs that spend 50 ms of CPU
 (the speed-up needs 2 idle cores) and runs that wait 50 ms (a remote or I/O-bound simulator;
@@ -27,11 +28,11 @@ import numpy as np
 import pymc as pm
 from pymc.smc.kernels import IMH
 
-from pymc_vcc.abc import abc_rejection
-from pymc_vcc.executors import make_executor
-from pymc_vcc.priors import UniformPrior
-from pymc_vcc.pymc_model import add_simulator
-from pymc_vcc.smc import ParallelIMH
+from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import ParallelIMH
+from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.testing import GaussianLocation, LinearGaussian, ShiftedProfile, Slow
 
 SIMULATION_SECONDS = 0.05

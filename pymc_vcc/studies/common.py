@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.executors import EXECUTOR_KINDS, Executor, make_executor
+from pymc_vcc.execution.executors import EXECUTOR_KINDS, Executor, make_executor
 
 
 @dataclass(frozen=True)

@@ -17,14 +17,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.cycle import OUTPUT_IDS
+from pymc_vcc.inference.predictive import sample_posterior_predictive
+from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
+from pymc_vcc.physics.cycle import OUTPUT_IDS
+from pymc_vcc.physics.simulate import VCCSimulator, simulate
+from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_inputs, plot_predictive, plot_prior_posterior, save_figure
-from pymc_vcc.predictive import sample_posterior_predictive
-from pymc_vcc.priors import UniformPrior
-from pymc_vcc.sequential import SequentialResult, sequential_calibration
-from pymc_vcc.simulate import VCCSimulator, simulate
 from pymc_vcc.studies.common import StudySettings, write_json, write_tree
-from pymc_vcc.unit import Unit, load_unit
 
 SENSITIVE = ("M0", "CF_VOL", "CF_POW", "CF_PREF", "CF_LEV")
 """Parameters the paper found well identified (Fig. 5), shown first in the KDE figures."""

@@ -17,14 +17,14 @@ import numpy as np
 import pymc as pm
 import xarray as xr
 
-from pymc_vcc.abc import abc_rejection
+from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.inference.rejection import abc_rejection
+from pymc_vcc.physics.simulate import VCCSimulator, simulate
+from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_charge_posteriors, save_figure
-from pymc_vcc.priors import UniformPrior
-from pymc_vcc.pymc_model import add_simulator
-from pymc_vcc.simulate import VCCSimulator, simulate
-from pymc_vcc.smc import sample_smc_abc
 from pymc_vcc.studies.common import StudySettings, write_json, write_tree
-from pymc_vcc.unit import Unit, load_unit
 
 Sampler = Literal["rejection", "smc"]
 SAMPLERS: tuple[str, ...] = ("rejection", "smc")

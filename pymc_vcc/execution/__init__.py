@@ -1,0 +1,1 @@
+"""Execution: executors, worker pool, outcomes, checkpoints, progress."""

@@ -1,0 +1,1 @@
+"""Inference: distances, priors, samplers, sequential calibration, predictive, sensitivity."""

@@ -1,0 +1,250 @@
+"""Posterior predictive: simulate posterior draws (e.g. on a longer input profile) and summarise.
+
+The paper's Figs. 6 and 8 show, for each output, the median and an interval of the outputs
+simulated with posterior draws over the whole 2120 s profile, of which only the first 1060 s
+were used for calibration. :func:`sample_posterior_predictive` runs those simulations in
+parallel (one random stream per draw from ``SeedSequence.spawn``, so the result does not depend
+on the executor) and returns the posterior's DataTree with three more groups:
+
+``posterior_predictive``
+    one variable per output over (chain, draw, time), SI units; failed runs are NaN.
+``predictive_bands``
+    per output, the median and the central interval over draws, dims (band, time) with
+    band = lower, median, upper (failed runs left out).
+``predictive_reference``
+    the reference outputs on the same profile (e.g. the ground truth), when given.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
+from pymc_vcc.execution.outcomes import WORKER_CRASH, run_simulation
+from pymc_vcc.inference.noise import add_output_noise, noise_parameter
+from pymc_vcc.inference.series import ObservedData, OutputData, Simulator, prepare_observed
+
+BANDS = ("lower", "median", "upper")
+
+
+@dataclass
+class _TimeAndUnits:
+    """A simulator wrapper that remembers the time grid and units of the Dataset it returns."""
+
+    simulator: Simulator
+    time: np.ndarray | None = None
+    units: dict[str, str] | None = None
+
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> OutputData:
+        result = self.simulator(theta, rng)
+        if isinstance(result, xr.Dataset):
+            if "time" in result.coords:
+                self.time = np.asarray(result["time"].values)
+            self.units = {
+                str(name): str(var.attrs["units"])
+                for name, var in result.data_vars.items()
+                if "units" in var.attrs
+            }
+        return result
+
+
+@dataclass(frozen=True)
+class PredictiveRun:
+    """Worker side: one posterior draw simulated, with its output noise.
+
+    Called with ``(theta, noise_scales, seed)``; returns ``(values | None, status, reason,
+    time | None, units | None)`` with values (n_outputs, n_time) in ``layout.names`` order.
+    """
+
+    simulator: Simulator
+    layout: ObservedData
+    time_limit_s: float | None
+
+    def __call__(self, item: tuple[dict[str, float], np.ndarray, np.random.SeedSequence]):
+        theta, scales, seed = item
+        rng = np.random.default_rng(seed)
+        recorder = _TimeAndUnits(self.simulator)
+        outcome = run_simulation(recorder, theta, rng, self.layout, time_limit_s=self.time_limit_s)
+        if not outcome.ok:
+            return None, outcome.status, outcome.reason, None, None
+        values = outcome.values
+        if np.any(scales > 0):
+            values = add_output_noise(values, scales, rng)
+        return values, outcome.status, "", recorder.time, recorder.units
+
+
+def _layout(
+    simulator: Simulator, outputs: Sequence[str] | None, reference: OutputData | None
+) -> ObservedData:
+    names = getattr(simulator, "output_names", None)
+    if reference is not None:
+        return prepare_observed(reference, outputs, names)
+    if names is None:
+        raise ValueError(
+            "the simulator has no output_names; pass reference= (outputs on the prediction "
+            "profile) so that outputs can be named"
+        )
+    names = tuple(names)
+    selected = tuple(names if outputs is None else outputs)
+    unknown = [name for name in selected if name not in names]
+    if unknown or not selected or isinstance(outputs, str):
+        raise ValueError(f"unknown outputs {unknown or outputs!r}; available: {list(names)}")
+    return ObservedData(names, selected, np.empty((len(selected), 0)), xr.Dataset())
+
+
+def _selected_draws(posterior: xr.Dataset, max_draws: int | None) -> xr.Dataset:
+    if max_draws is None:
+        return posterior
+    if int(max_draws) != max_draws or max_draws < 1:
+        raise ValueError(f"max_draws must be a positive integer or None, got {max_draws}")
+    n_chains, n_draws = posterior.sizes["chain"], posterior.sizes["draw"]
+    per_chain = max(1, min(n_draws, int(max_draws) // n_chains))
+    keep = np.unique(np.linspace(0, n_draws - 1, per_chain).round().astype(int))
+    return posterior.isel(draw=keep)
+
+
+def sample_posterior_predictive(
+    idata: xr.DataTree,
+    simulator: Simulator,
+    *,
+    parameters: Sequence[str] | None = None,
+    outputs: Sequence[str] | None = None,
+    reference: OutputData | None = None,
+    noise: bool = True,
+    interval: float = 0.9,
+    max_draws: int | None = None,
+    executor: Executor | ExecutorKind = "processes",
+    n_workers: int | None = None,
+    seed: int | np.random.SeedSequence | None = None,
+    time_limit_s: float | None = None,
+) -> xr.DataTree:
+    """Simulate posterior draws with ``simulator`` and add the predictive groups to ``idata``.
+
+    Args:
+        idata: a result with a ``posterior`` group holding one (chain, draw) variable per
+            parameter (from :func:`pymc_vcc.inference.pymc.smc.sample_smc_abc` or the rejection
+            sampler).
+        simulator: the model on the prediction profile, e.g. ``VCCSimulator(unit, inputs)``
+            with the full 2120 s inputs.
+        parameters: posterior variables passed to the simulator (default: those it names in
+            ``parameter_names``); parameters left out keep the simulator's nominal values.
+        outputs: outputs to predict (default: every output of the simulator or reference).
+        reference: outputs observed (or true) on the same profile, stored for comparison.
+        noise: add the output noise Y + ν·|Y|·Z for outputs whose ``nu_<output>`` is in the
+            posterior (the predictive of data); False: predict the noise-free outputs.
+        interval: probability mass of the central band, in (0, 1) (e.g. 0.9 → 5 %–95 %).
+        max_draws: simulate at most this many posterior draws, evenly thinned (default: all).
+        executor: an executor, or a kind (``"serial"``, ``"processes"``, ``"dask"``).
+        n_workers: workers of an executor made here.
+        seed: seeds the simulations' random streams (noise, stochastic simulators).
+        time_limit_s: wall-time limit of one simulation, s; longer runs count as failed.
+
+    Returns:
+        A copy of ``idata`` with groups ``posterior_predictive``, ``predictive_bands`` and (if
+        ``reference`` is given) ``predictive_reference``; ``predictive_bands`` attrs give
+        the draws simulated, failed and the failure kinds.
+    """
+    if "posterior" not in idata.children:
+        raise ValueError("idata has no posterior group")
+    if not 0.0 < interval < 1.0:
+        raise ValueError(f"interval must lie in (0, 1), got {interval}")
+    posterior = _selected_draws(idata["posterior"].to_dataset(), max_draws)
+    if parameters is None:
+        known = getattr(simulator, "parameter_names", None)
+        if known is None:
+            raise ValueError("the simulator has no parameter_names; pass parameters=")
+        parameters = [name for name in posterior.data_vars if name in known]
+    missing = [name for name in parameters if name not in posterior.data_vars]
+    if missing or not parameters:
+        raise ValueError(
+            f"posterior lacks parameter(s) {missing or parameters}; it has "
+            f"{list(posterior.data_vars)}"
+        )
+    layout = _layout(simulator, outputs, reference)
+    noise_names = [noise_parameter(name) for name in layout.names]
+    n_chains, n_draws = posterior.sizes["chain"], posterior.sizes["draw"]
+    values = {name: posterior[name].values.reshape(-1) for name in parameters}
+    scales = np.column_stack(
+        [
+            posterior[name].values.reshape(-1)
+            if noise and name in posterior.data_vars
+            else np.zeros(n_chains * n_draws)
+            for name in noise_names
+        ]
+    )
+    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    seeds = root.spawn(n_chains * n_draws)
+    items = [
+        ({name: float(values[name][i]) for name in parameters}, scales[i], seeds[i])
+        for i in range(n_chains * n_draws)
+    ]
+    with executor_scope(executor, n_workers) as pool:
+        results = [
+            (None, WORKER_CRASH, result.reason, None, None)
+            if isinstance(result, WorkerCrash)
+            else result
+            for result in pool.map(PredictiveRun(simulator, layout, time_limit_s), items)
+        ]
+
+    finished = [r for r in results if r[0] is not None]
+    if not finished:
+        kinds = Counter(r[1] for r in results)
+        raise RuntimeError(
+            f"all {len(results)} predictive simulations failed ({dict(kinds)}), e.g. "
+            f"{results[0][2]!r}"
+        )
+    n_time = finished[0][0].shape[1]
+    time = finished[0][3] if finished[0][3] is not None else np.arange(n_time)
+    units = finished[0][4] or {}
+    stacked = np.full((n_chains * n_draws, len(layout.names), n_time), np.nan)
+    for index, (simulated, *_rest) in enumerate(results):
+        if simulated is not None:
+            stacked[index] = simulated
+    stacked = stacked.reshape(n_chains, n_draws, len(layout.names), n_time)
+    coords = {"chain": posterior["chain"].values, "draw": posterior["draw"].values, "time": time}
+    predictive = xr.Dataset(
+        {
+            name: (("chain", "draw", "time"), stacked[:, :, j], _attrs(units, name))
+            for j, name in enumerate(layout.names)
+        },
+        coords=coords,
+    )
+    predictive["time"].attrs["units"] = "s"
+
+    probabilities = [(1 - interval) / 2, 0.5, (1 + interval) / 2]
+    flat = stacked.reshape(n_chains * n_draws, len(layout.names), n_time)
+    ok = ~np.isnan(flat).any(axis=(1, 2))
+    quantiles = np.quantile(flat[ok], probabilities, axis=0)  # (band, output, time)
+    failures = Counter(r[1] for r in results if r[0] is None)
+    bands = xr.Dataset(
+        {
+            name: (("band", "time"), quantiles[:, j], _attrs(units, name))
+            for j, name in enumerate(layout.names)
+        },
+        coords={"band": list(BANDS), "time": time, "probability": ("band", probabilities)},
+        attrs={
+            "interval": float(interval),
+            "n_draws": int(flat.shape[0]),
+            "n_failed": int((~ok).sum()),
+            "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(failures.items())),
+            "noise": int(bool(noise)),
+        },
+    )
+    tree = idata.copy()
+    tree["posterior_predictive"] = xr.DataTree(predictive)
+    tree["predictive_bands"] = xr.DataTree(bands)
+    if reference is not None:
+        tree["predictive_reference"] = xr.DataTree(layout.dataset)
+    return tree
+
+
+def _attrs(units: Mapping[str, str], name: str) -> dict[str, str]:
+    return {"units": units[name]} if name in units else {}
+
+
+__all__ = ["BANDS", "PredictiveRun", "sample_posterior_predictive"]

@@ -1,0 +1,1 @@
+"""PyMC integration: the simulator node and the parallel SMC kernel."""

@@ -1,0 +1,413 @@
+"""A simulator as a node of a PyMC model: priors, output-noise scales and a ``pm.Simulator``.
+
+:func:`add_simulator` puts any simulator ``simulator(theta, rng) -> outputs`` (the VCC model or
+one of :mod:`pymc_vcc.testing`) into the current PyMC model:
+
+* one PyMC variable per calibrated parameter, from a uniform box (by default the bounds of the
+  unit description or of the simulator) or from a :class:`~pymc_vcc.inference.priors.GMMPrior` (a
+  mixture
+  of multivariate normals in the logit space of the bounds, see :func:`gmm_prior_variable`);
+* optional output-noise scales ν (one per output, named ``nu_<output>``): the paper's learnable
+  noise, Y ← Y + ν·|Y|·Z with Z ~ N(0, 1), drawn with the simulation's own random stream;
+* a ``pm.Simulator`` whose pseudo-log-likelihood is the Gaussian kernel −½ (d/ε)² of the
+  distance d between simulated and observed outputs (by default the paper's KS distance
+  averaged over outputs); failed simulations give −inf (zero likelihood), never an error.
+
+The node samples with the stock ``pm.sample_smc`` (one particle after another) and with
+:class:`pymc_vcc.inference.pymc.smc.ParallelIMH`, which simulates all particles of a stage in one
+parallel batch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pymc as pm
+import pytensor.tensor as pt
+from pymc.distributions.shape_utils import rv_size_is_none
+from pymc.logprob.transforms import Transform
+from pytensor.graph.basic import Apply
+from pytensor.graph.op import Op
+from pytensor.tensor.variable import TensorVariable
+
+from pymc_vcc.execution.outcomes import SimulationOutcome, run_simulation
+from pymc_vcc.inference.distances import BatchDistance, ks_distances
+from pymc_vcc.inference.noise import NOISE_PREFIX, add_output_noise, noise_parameter, with_noise
+from pymc_vcc.inference.priors import Bounds, GMMPrior, Prior, UniformPrior
+from pymc_vcc.inference.series import ObservedData, OutputData, Simulator, prepare_observed
+
+
+def gaussian_log_kernel(distance: np.ndarray | float, epsilon: float) -> np.ndarray:
+    """ABC log-kernel −½ (d/ε)² of distances d (higher is closer); non-finite d gives −inf."""
+    d = np.asarray(distance, dtype=float)
+    return np.where(np.isfinite(d), -0.5 * (d / epsilon) ** 2, -np.inf)
+
+
+class DistanceKernel(Op):
+    """PyTensor op ``(epsilon, observed, simulated) -> [−½ (d/ε)²]`` for ``pm.Simulator``.
+
+    ``d = distance(simulated[None], observed)[0]`` with a batch distance of
+    :mod:`pymc_vcc.inference.distances` (default: KS averaged over outputs). A simulation with any
+    non-finite value (a failed run) gives −inf, which both ``pm.sample_smc`` and
+    :class:`pymc_vcc.inference.pymc.smc.ParallelIMH` treat as zero likelihood.
+    """
+
+    __props__ = ("distance",)
+
+    def __init__(self, distance: BatchDistance = ks_distances) -> None:
+        self.distance = distance
+
+    def make_node(self, epsilon, observed, simulated) -> Apply:
+        inputs = [pt.as_tensor_variable(value) for value in (epsilon, observed, simulated)]
+        return Apply(self, inputs, [pt.dvector()])
+
+    def perform(self, node, inputs, output_storage) -> None:
+        epsilon, observed, simulated = inputs
+        output_storage[0][0] = np.atleast_1d(self.log_kernel(float(epsilon), observed, simulated))
+
+    def log_kernel(self, epsilon: float, observed: np.ndarray, simulated: np.ndarray) -> float:
+        """The log-kernel of one simulation (n_outputs, m) against observed (n_outputs, n)."""
+        simulated = np.asarray(simulated, dtype=float)
+        if not np.isfinite(simulated).all():
+            return -np.inf
+        distance = self.distance(simulated[np.newaxis], np.asarray(observed, dtype=float))[0]
+        return float(gaussian_log_kernel(distance, epsilon))
+
+
+@dataclass(frozen=True)
+class SimulatorFunction:
+    """The random function of the ``pm.Simulator`` node: parameters in, noisy outputs out.
+
+    Called by PyTensor as ``fn(rng, theta, [noise,] size)`` with ``theta`` the parameter
+    vector in ``parameter_names`` order and ``noise`` the ν vector in ``noise_outputs`` order;
+    returns the selected outputs (n_outputs, n_time), all NaN when the run failed.
+    :meth:`outcome` gives the same result with the failure kind and reason.
+
+    Attributes:
+        simulator: ``simulator(theta, rng) -> Dataset | array``.
+        parameter_names: names of the entries of ``theta``.
+        observed: the validated observed data (selects and orders the outputs).
+        noise_outputs: outputs with a noise scale, a subset of ``observed.names``.
+        time_limit_s: wall-time limit of one run, s (None: none).
+    """
+
+    simulator: Simulator
+    parameter_names: tuple[str, ...]
+    observed: ObservedData
+    noise_outputs: tuple[str, ...] = ()
+    time_limit_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.parameter_names:
+            raise ValueError("parameter_names is empty; name at least one parameter")
+        unknown = [name for name in self.noise_outputs if name not in self.observed.names]
+        if unknown:
+            raise ValueError(
+                f"noise_outputs {unknown} are not among the observed outputs "
+                f"{list(self.observed.names)}"
+            )
+
+    def outcome(self, rng: np.random.Generator, theta, noise=None) -> SimulationOutcome:
+        """Run one simulation; failures are captured as in :func:`run_simulation`."""
+        values = np.asarray(theta, dtype=float).reshape(-1, len(self.parameter_names))[0]
+        parameters = dict(zip(self.parameter_names, map(float, values), strict=True))
+        result = run_simulation(
+            self.simulator, parameters, rng, self.observed, time_limit_s=self.time_limit_s
+        )
+        if not result.ok or not self.noise_outputs:
+            return result
+        scales = np.zeros(len(self.observed.names))
+        given = np.asarray(noise, dtype=float).reshape(-1, len(self.noise_outputs))[0]
+        for output, scale in zip(self.noise_outputs, given, strict=True):
+            scales[self.observed.names.index(output)] = scale
+        return replace(result, values=add_output_noise(result.values, scales, rng))
+
+    def __call__(self, rng: np.random.Generator, *args) -> np.ndarray:
+        params = args[:-1]  # the last argument is PyTensor's ``size``, fixed by the observed
+        result = self.outcome(rng, *params)
+        if result.ok:
+            return result.values
+        return np.full(self.observed.values.shape, np.nan)
+
+
+# --- GMM prior as a PyMC distribution -------------------------------------------------------
+
+
+def _gmm_logp(value, weights, means, inverse_cholesky, log_det, lower, upper):
+    """Log-density in physical space of the logit-space mixture (see :class:`GMMPrior`)."""
+    width = upper - lower
+    fraction = (value - lower) / width
+    inside = pt.all(pt.and_(pt.gt(fraction, 0.0), pt.lt(fraction, 1.0)), axis=-1)
+    safe = pt.switch(pt.and_(pt.gt(fraction, 0.0), pt.lt(fraction, 1.0)), fraction, 0.5)
+    unbounded = pt.log(safe) - pt.log1p(-safe)
+    centred = unbounded[..., None, :] - means  # (..., k, d)
+    whitened = pt.sum(centred[..., None, :] * inverse_cholesky, axis=-1)  # (..., k, d)
+    d = means.shape[-1]
+    component = (
+        pt.log(weights)
+        - 0.5 * pt.sum(whitened**2, axis=-1)
+        - 0.5 * (d * np.log(2 * np.pi) + log_det)
+    )
+    log_jacobian = -pt.sum(pt.log(width) + pt.log(safe) + pt.log1p(-safe), axis=-1)
+    density = pt.logsumexp(component, axis=-1) + log_jacobian
+    return pt.switch(inside, density, -np.inf)
+
+
+def _gmm_support_point(rv, size, weights, means, inverse_cholesky, log_det, lower, upper):
+    """A start inside the box: the mixture's mean in logit space, mapped to the bounds.
+
+    (Not an ``initval``: SMC would start every particle there instead of drawing the prior.)
+    """
+    centre = lower + (upper - lower) * pt.sigmoid(pt.sum(weights[..., None] * means, axis=-2))
+    if rv_size_is_none(size):
+        return centre
+    return pt.broadcast_to(centre, pt.concatenate([size, centre.shape[-1:]]))
+
+
+@dataclass(frozen=True)
+class _GMMRandom:
+    """Random draws of a :class:`GMMPrior` in the form ``pm.CustomDist`` expects."""
+
+    prior: GMMPrior
+
+    def __call__(self, *params, rng: np.random.Generator, size) -> np.ndarray:
+        shape = () if size is None else tuple(size)
+        draws = self.prior.sample(int(np.prod(shape, dtype=int)), rng)
+        return draws.reshape((*shape, self.prior.ndim))
+
+
+class LogitBox(Transform):
+    """Vector transform of a box [lower, upper]^d to R^d: u = log((x − lower) / (upper − x)).
+
+    PyMC's own interval transform is univariate and refuses multivariate variables; this one
+    sums its log-Jacobian over the vector, as a multivariate transform must.
+    """
+
+    name = "logit_box"
+    ndim_supp = 1
+
+    def __init__(self, lower: np.ndarray, upper: np.ndarray) -> None:
+        self.lower = np.asarray(lower, dtype=float)
+        self.upper = np.asarray(upper, dtype=float)
+
+    def forward(self, value, *inputs):
+        return pt.log(value - self.lower) - pt.log(self.upper - value)
+
+    def backward(self, value, *inputs):
+        return self.lower + (self.upper - self.lower) * pt.sigmoid(value)
+
+    def log_jac_det(self, value, *inputs):
+        width = np.log(self.upper - self.lower)
+        return pt.sum(width - pt.softplus(-value) - pt.softplus(value), axis=-1)
+
+
+def gmm_prior_variable(name: str, prior: GMMPrior, **kwargs) -> TensorVariable:
+    """A vector PyMC variable distributed as ``prior`` (in its ``names`` order).
+
+    Its log-density equals :meth:`GMMPrior.logpdf`; it is sampled in the logit space of the
+    bounds (the :class:`LogitBox` transform), where the mixture is Gaussian. Must be called inside a
+    model context; ``kwargs`` go to ``pm.CustomDist`` (e.g. ``dims``).
+    """
+    if not isinstance(prior, GMMPrior):
+        raise TypeError(f"prior must be a GMMPrior, got {type(prior).__name__}")
+    inverse_cholesky = np.linalg.inv(np.linalg.cholesky(prior.covariances))
+    log_det = np.linalg.slogdet(prior.covariances)[1]
+    return pm.CustomDist(
+        name,
+        prior.weights,
+        prior.means,
+        inverse_cholesky,
+        log_det,
+        prior.lower,
+        prior.upper,
+        logp=_gmm_logp,
+        random=_GMMRandom(prior),
+        support_point=_gmm_support_point,
+        signature="(k),(k,d),(k,d,d),(k),(d),(d)->(d)",
+        transform=LogitBox(prior.lower, prior.upper),
+        **kwargs,
+    )
+
+
+def prior_variables(prior: Prior, *, joint_name: str = "theta") -> dict[str, TensorVariable]:
+    """One PyMC variable per parameter of ``prior``, in the current model; name -> variable.
+
+    A :class:`UniformPrior` gives independent ``pm.Uniform`` variables; a :class:`GMMPrior`
+    gives one joint vector variable ``joint_name`` and a ``pm.Deterministic`` per parameter, so
+    the posterior holds one variable per parameter name either way.
+    """
+    if isinstance(prior, UniformPrior):
+        return {
+            name: pm.Uniform(name, lower=low, upper=high)
+            for name, (low, high) in prior.bounds.items()
+        }
+    if isinstance(prior, GMMPrior):
+        joint = gmm_prior_variable(joint_name, prior)
+        return {
+            name: pm.Deterministic(name, joint[index]) for index, name in enumerate(prior.names)
+        }
+    raise TypeError(f"prior must be a UniformPrior or a GMMPrior, got {type(prior).__name__}")
+
+
+def simulator_bounds(
+    simulator: Simulator, parameters: Sequence[str] | None = None
+) -> dict[str, tuple[float, float]]:
+    """Physical bounds of a simulator's parameters: its ``bounds`` attribute or its unit's table.
+
+    Args:
+        simulator: a simulator with ``bounds`` (name -> (low, high), as in
+            :mod:`pymc_vcc.testing`) or with a unit description (``simulator.unit.parameters``,
+            Table III of the paper, as :class:`pymc_vcc.physics.simulate.VCCSimulator`).
+        parameters: names to keep, in this order (default: the simulator's
+            ``parameter_names`` if it has them, else all).
+    """
+    if hasattr(simulator, "bounds"):
+        available = dict(simulator.bounds)
+    elif hasattr(simulator, "unit"):
+        available = {spec.id: (spec.low, spec.high) for spec in simulator.unit.parameters}
+    else:
+        raise ValueError(
+            f"{type(simulator).__name__} has neither `bounds` nor a unit description; "
+            "pass prior= explicitly"
+        )
+    if parameters is None:
+        parameters = getattr(simulator, "parameter_names", None) or list(available)
+    if isinstance(parameters, str):
+        raise TypeError(f"parameters must be a sequence of names, got the string {parameters!r}")
+    unknown = [name for name in parameters if name not in available]
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {unknown}; the simulator has {list(available)}")
+    return {name: available[name] for name in parameters}
+
+
+@dataclass(frozen=True)
+class SimulatorNode:
+    """What :func:`add_simulator` added to the model.
+
+    Attributes:
+        variable: the ``pm.Simulator`` random variable (observed).
+        prior: the prior over every calibrated name (parameters and noise scales).
+        parameter_names: simulator parameters calibrated, in the order the simulator gets them.
+        noise_outputs: outputs with a noise scale ``nu_<output>``.
+        observed: the validated observed data.
+        function: the node's random function (runs one simulation).
+    """
+
+    variable: TensorVariable
+    prior: Prior
+    parameter_names: tuple[str, ...]
+    noise_outputs: tuple[str, ...]
+    observed: ObservedData
+    function: SimulatorFunction
+
+
+def add_simulator(
+    name: str,
+    simulator: Simulator,
+    observed: OutputData,
+    *,
+    parameters: Sequence[str] | None = None,
+    prior: Prior | Bounds | None = None,
+    outputs: Sequence[str] | None = None,
+    noise: Bounds | tuple[float, float] | None = None,
+    epsilon: float = 0.05,
+    distance: BatchDistance = ks_distances,
+    time_limit_s: float | None = None,
+) -> SimulatorNode:
+    """Add ``simulator`` to the current PyMC model as a ``pm.Simulator`` named ``name``.
+
+    Args:
+        name: name of the observed node (its coords are ``<name>_output``, ``<name>_time``).
+        simulator: ``simulator(theta, rng) -> Dataset | array (outputs, time)``, picklable.
+        observed: observed outputs (Dataset with one variable per output, or an array).
+        parameters: simulator parameters to calibrate (default: all those of ``prior``, or of
+            the simulator's bounds / unit description when ``prior`` is None); the others keep
+            the simulator's nominal values.
+        prior: a :class:`UniformPrior`, a :class:`GMMPrior` (e.g. the fitted posterior of the
+            previous dataset; its names may include noise scales ``nu_<output>``) or bounds
+            name -> (low, high). Default: uniform on the simulator's bounds.
+        outputs: outputs compared (default: all outputs of ``observed``).
+        noise: bounds of uniform priors on the noise scales ν: one pair for every output or a
+            mapping output -> (low, high); None: no noise (unless ``prior`` names them).
+        epsilon: width ε of the Gaussian kernel −½ (d/ε)², in distance units (KS: [0, 1]).
+        distance: batch distance ``(sims (N, n_out, m), obs (n_out, n)) -> (N,)``.
+        time_limit_s: wall-time limit of one simulation, s; longer runs count as failed.
+
+    Returns:
+        A :class:`SimulatorNode` describing the node and the variables it created.
+    """
+    model = pm.modelcontext(None)
+    if not np.isfinite(epsilon) or epsilon <= 0:
+        raise ValueError(f"epsilon must be a positive number, got {epsilon}")
+    data = prepare_observed(observed, outputs, getattr(simulator, "output_names", None))
+
+    if prior is None:
+        prior = UniformPrior(simulator_bounds(simulator, parameters))
+    elif not isinstance(prior, Prior):
+        prior = UniformPrior(prior)
+    if noise is not None and not isinstance(noise, Mapping):
+        noise = dict.fromkeys(data.names, noise)
+    prior = with_noise(prior, noise, data.names)
+
+    noise_outputs = tuple(out for out in data.names if noise_parameter(out) in prior.names)
+    stray_noise = [
+        n
+        for n in prior.names
+        if n.startswith(NOISE_PREFIX) and n[len(NOISE_PREFIX) :] not in data.names
+    ]
+    if stray_noise:
+        raise ValueError(
+            f"prior names noise scales {stray_noise} of outputs not compared; outputs: "
+            f"{list(data.names)}"
+        )
+    model_parameters = tuple(n for n in prior.names if not n.startswith(NOISE_PREFIX))
+    if parameters is not None and set(parameters) != set(model_parameters):
+        raise ValueError(
+            f"parameters {list(parameters)} differ from the prior's parameters "
+            f"{list(model_parameters)}"
+        )
+    known = getattr(simulator, "parameter_names", None)
+    if known is not None:
+        unknown = [n for n in model_parameters if n not in known]
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {unknown}; the simulator has {list(known)}")
+    if not model_parameters:
+        raise ValueError("the prior holds no simulator parameter to calibrate")
+
+    variables = prior_variables(prior, joint_name=f"{name}_theta")
+    function = SimulatorFunction(
+        simulator, model_parameters, data, noise_outputs, time_limit_s=time_limit_s
+    )
+    params = [pt.stack([variables[n] for n in model_parameters])]
+    if noise_outputs:
+        params.append(pt.stack([variables[noise_parameter(out)] for out in noise_outputs]))
+
+    time = data.dataset["time"].values if "time" in data.dataset.coords else None
+    model.add_coord(f"{name}_output", list(data.names))
+    model.add_coord(f"{name}_time", time if time is not None else np.arange(data.values.shape[1]))
+    variable = pm.Simulator(
+        name,
+        function,
+        *params,
+        distance=DistanceKernel(distance),
+        sum_stat="identity",
+        epsilon=float(epsilon),
+        signature="(p)->()" if len(params) == 1 else "(p),(q)->()",
+        observed=data.values,
+        dims=(f"{name}_output", f"{name}_time"),
+    )
+    return SimulatorNode(variable, prior, model_parameters, noise_outputs, data, function)
+
+
+__all__ = [
+    "DistanceKernel",
+    "SimulatorFunction",
+    "SimulatorNode",
+    "add_simulator",
+    "gaussian_log_kernel",
+    "gmm_prior_variable",
+    "prior_variables",
+    "simulator_bounds",
+]

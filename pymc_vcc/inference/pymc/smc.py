@@ -1,0 +1,561 @@
+"""SMC-ABC with the simulations of each stage run as one parallel batch.
+
+``pm.sample_smc`` evaluates the (pseudo-)likelihood of its particles one after another in a Python
+loop, and its ``cores`` only run whole independent SMC runs side by side. With a simulator that
+costs a second, that loop is the bottleneck. :class:`ParallelIMH` is PyMC's independent
+Metropolis–Hastings SMC kernel with the likelihood evaluated differently: where the stock
+kernel calls a compiled likelihood per particle (running the simulator inside PyTensor), it
+
+1. evaluates the parameters of every ``pm.Simulator`` node for all particles (compiled, cheap),
+2. runs all their simulations in one batch through an executor of
+   :mod:`pymc_vcc.execution.executors` (serial, local processes or Dask), each with its own random
+   stream from ``SeedSequence.spawn`` (results do not depend on which worker ran them),
+3. computes the log-likelihoods from the simulated outputs (the node's distance kernel and any
+   other observed terms, compiled), with −inf for a failed simulation: zero likelihood, so
+   the particle is dropped at resampling or the proposal rejected, never a crash.
+
+Everything else (tempering, resampling, proposals, acceptance) is the stock IMH kernel, drawing
+from the same random generator in the same order: with a simulator that does not use its
+random stream, the same seed gives the same posterior as the stock kernel, bit for bit.
+
+Simulations run and failed per stage are recorded in ``sample_stats`` (``simulations``,
+``failed_simulations``, ``resumed_simulations``, ``stage_seconds``) and their totals in its
+attributes.
+
+Checkpoints (``sample_smc_abc(checkpoint=path)``): with a fixed seed, a run proposes the same
+particles in the same order, each simulation with the same random stream; so a run started again
+requests the same simulations. Each finished one is persisted, chunk by chunk as the executor
+returns them, in a :class:`~pymc_vcc.execution.store.LikelihoodStore` under a key digesting its
+particle,
+its node and its random stream, with its log-likelihood term and failure status (not its
+outputs). A run resumed after a crash takes those from the file instead of simulating them again
+(``resumed_simulations``) and gives the uninterrupted run's posterior, bit for bit; a run with
+other settings (draws, prior, observed data, ε, simulator, seed...) is refused, naming them.
+
+Why one chain by default (:func:`sample_smc_abc`): an SMC stage already offers ``draws``
+independent simulations to run in parallel, so one chain keeps every worker busy; each extra
+chain is a whole second SMC run (as many simulations again) that improves the posterior less
+than doubling ``draws`` would. PyMC's own parallel chains run in daemonic processes, which
+cannot start worker processes of their own, so a kernel sent to them simulates serially.
+Run several chains (for convergence diagnostics) one after another with ``cores=1``: each
+uses the whole executor.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import time
+import warnings
+from collections import Counter
+from collections.abc import Callable, Sequence
+from functools import partial
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+import pymc as pm
+import pytensor.tensor as pt
+from pymc.blocking import DictToArrayBijection
+from pymc.distributions.simulator import SimulatorRV
+from pymc.model import Model, modelcontext
+from pymc.pytensorf import compile as compile_pytensor
+from pymc.pytensorf import floatX, join_nonshared_inputs, make_shared_replacements
+from pymc.smc.kernels import IMH, Pearson
+from pytensor.graph.basic import Constant
+from pytensor.graph.traversal import ancestors
+from pytensor.tensor.type_other import NoneTypeT
+from xarray import DataTree
+
+from pymc_vcc.execution.executors import (
+    Executor,
+    ExecutorKind,
+    SerialExecutor,
+    WorkerCrash,
+    executor_scope,
+)
+from pymc_vcc.execution.outcomes import OK, SimulationOutcome, crash_outcome
+from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore
+from pymc_vcc.inference.pymc.model import SimulatorFunction
+
+logger = logging.getLogger(__name__)
+
+_MAX_REASONS = 5
+
+
+def _generic_outcome(function: Callable[..., Any], rng, params, size) -> SimulationOutcome:
+    """Run a ``pm.Simulator`` random function, capturing exceptions and non-finite outputs."""
+    start = time.perf_counter()
+    try:
+        values = np.asarray(function(rng, *params, size), dtype=float)
+    except Exception as exc:
+        reason = f"{type(exc).__name__}: {exc}"[:300]
+        return SimulationOutcome(None, "exception", reason, time.perf_counter() - start)
+    elapsed = time.perf_counter() - start
+    if not np.isfinite(values).all():
+        count = int((~np.isfinite(values)).sum())
+        return SimulationOutcome(None, "non-finite", f"{count} non-finite value(s)", elapsed)
+    return SimulationOutcome(values, OK, "", elapsed)
+
+
+def _simulate(functions: Sequence[Callable[..., Any]], task: tuple) -> SimulationOutcome:
+    """Worker side: one simulation of one ``pm.Simulator`` node, with its own random stream."""
+    node, seed, size, params = task
+    function = functions[node]
+    rng = np.random.default_rng(seed)
+    if isinstance(function, SimulatorFunction):
+        return function.outcome(rng, *params)
+    return _generic_outcome(function, rng, params, None if size is None else tuple(size))
+
+
+class _BatchLikelihood:
+    """The model's likelihood with its ``pm.Simulator`` nodes evaluated outside PyTensor.
+
+    Compiles two functions of the flat particle vector (in the order of ``value_vars``): the
+    random-function inputs (size and parameters) of every simulator node, and the total
+    log-likelihood given the simulated outputs of every node (distance kernels, plus the
+    log-probability of any other observed variable and of potentials).
+    """
+
+    def __init__(self, model: Model, value_vars: list, compile_kwargs: dict | None) -> None:
+        nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
+        if not nodes:
+            raise ValueError(
+                "the model has no pm.Simulator node; ParallelIMH batches simulations only "
+                "(use pm.sample_smc's default kernel for models with ordinary likelihoods)"
+            )
+        others = [rv for rv in model.observed_RVs if rv not in nodes]
+        self.functions = tuple(type(rv.owner.op).fn for rv in nodes)
+        self.n_nodes = len(nodes)
+
+        node_inputs: list = []
+        self._slices = []
+        for rv in nodes:
+            size = rv.owner.op.size_param(rv.owner)
+            if size is None or isinstance(size.type, NoneTypeT):
+                size = pt.constant(np.zeros(0, dtype="int64"))  # no size: an empty vector
+            params = list(rv.owner.op.dist_params(rv.owner))
+            first = len(node_inputs)
+            node_inputs += [size, *params]
+            self._slices.append(slice(first, len(node_inputs)))
+        node_inputs = model.replace_rvs_by_values(node_inputs)
+
+        terms = []
+        for rv in nodes:
+            op = rv.owner.op
+            observed = model.rvs_to_values[rv]
+            placeholder = rv.type()
+            term = pt.sum(op.distance(op.epsilon, op.sum_stat(observed), op.sum_stat(placeholder)))
+            terms.append((term, placeholder))
+        other_terms = model.logp(vars=others) if others else pt.constant(0.0)
+        rest = other_terms + model.potentiallogp
+
+        point = model.initial_point()
+        shared = make_shared_replacements(point, value_vars, model)
+        outputs, flat = join_nonshared_inputs(
+            point, [rest, *(term for term, _ in terms), *node_inputs], value_vars, shared
+        )
+        kwargs = {**(compile_kwargs or {}), "on_unused_input": "ignore"}
+        self._rest = compile_pytensor([flat], outputs[0], **kwargs)
+        self._terms = [
+            compile_pytensor([flat, placeholder], outputs[1 + node], **kwargs)
+            for node, (_, placeholder) in enumerate(terms)
+        ]
+        self._inputs = compile_pytensor([flat], outputs[1 + self.n_nodes :], **kwargs)
+        for function in (self._rest, *self._terms, self._inputs):
+            function.trust_input = True
+        self._dtypes = [rv.type.dtype for rv in nodes]
+
+    def tasks(self, points: np.ndarray, seeds: Sequence[np.random.SeedSequence]) -> list[tuple]:
+        """One task (node, seed, size, params) per node and point, node-major."""
+        inputs = [self._inputs(point) for point in points]
+        tasks = []
+        for node, where in enumerate(self._slices):
+            for index, values in enumerate(inputs):
+                size, *params = values[where]
+                seed = seeds[node * len(points) + index]
+                tasks.append((node, seed, None if size.size == 0 else size, params))
+        return tasks
+
+    def term(self, node: int, point: np.ndarray, outcome: SimulationOutcome) -> float:
+        """The log-likelihood term of one simulation of ``node`` at ``point``; NaN if failed."""
+        if not outcome.ok:
+            return np.nan
+        values = np.asarray(outcome.values, dtype=self._dtypes[node])
+        return float(self._terms[node](point, values))
+
+    def evaluate(self, points: np.ndarray, terms: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        """Log-likelihood of each point from its nodes' terms (node-major, as the tasks); −inf
+        where any simulation failed."""
+        n = len(points)
+        terms = terms.reshape(self.n_nodes, n)
+        ok = ok.reshape(self.n_nodes, n).all(axis=0)
+        loglik = np.full(n, -np.inf)
+        for index in np.flatnonzero(ok):
+            total = terms[0, index]
+            for node in range(1, self.n_nodes):
+                total = total + terms[node, index]
+            loglik[index] = total + float(self._rest(points[index]))
+        loglik[np.isnan(loglik)] = -np.inf
+        return loglik
+
+
+def _simulation_key(point: np.ndarray, node: int, seed: np.random.SeedSequence) -> str:
+    """Checkpoint key of one simulation: digest of the particle, the node and the random stream."""
+    digest = hashlib.sha256(np.ascontiguousarray(point, dtype=float).tobytes())
+    digest.update(f"{node}|{seed.entropy}|{tuple(seed.spawn_key)}".encode())
+    return digest.hexdigest()
+
+
+class ParallelIMH(IMH):
+    """PyMC's IMH SMC kernel with the simulations of all particles run as one parallel batch.
+
+    Use it as ``pm.sample_smc(kernel=ParallelIMH, executor=ex, chains=1, ...)`` on a model
+    with ``pm.Simulator`` nodes (e.g. from :func:`pymc_vcc.inference.pymc.model.add_simulator`), or
+    through :func:`sample_smc_abc`, which picks defaults suited to expensive simulators.
+
+    Args:
+        executor: where simulations run, an executor of :mod:`pymc_vcc.execution.executors` (the
+            caller
+            opens and closes it); None runs them in this process.
+        checkpoint: an open :class:`~pymc_vcc.execution.store.LikelihoodStore` (the caller opens and
+            closes it, fingerprinting the run: :func:`sample_smc_abc` does): each finished
+            simulation is persisted there, and one already there is not run again.
+        correlation_threshold: as for ``pymc.smc.kernels.IMH``.
+        **kwargs: the stock kernel's arguments (``draws``, ``model``, ``threshold``, ...).
+    """
+
+    stats_dtypes_shapes: ClassVar[dict[str, tuple[type, list]]] = {
+        **IMH.stats_dtypes_shapes,
+        "simulations": (int, []),
+        "failed_simulations": (int, []),
+        "resumed_simulations": (int, []),
+        "stage_seconds": (float, []),
+    }
+
+    def __init__(
+        self,
+        *args,
+        executor: Executor | None = None,
+        checkpoint: LikelihoodStore | None = None,
+        correlation_threshold=0.01,
+        **kwargs,
+    ) -> None:
+        compile_kwargs = dict(kwargs.get("compile_kwargs") or {})
+        super().__init__(*args, correlation_threshold=correlation_threshold, **kwargs)
+        if executor is not None and not isinstance(executor, Executor):
+            raise TypeError(
+                "executor must be a pymc_vcc.execution.executors.Executor "
+                f"(make_executor(...)) or None, "
+                f"got {type(executor).__name__}; sample_smc_abc also accepts a kind name"
+            )
+        self.executor: Executor = SerialExecutor() if executor is None else executor
+        self.checkpoint = checkpoint
+        self._finished: dict[str, LikelihoodRecord] = {}
+        self._likelihood = _BatchLikelihood(
+            modelcontext(kwargs.get("model")), self.variables, compile_kwargs
+        )
+        self._seeds = np.random.SeedSequence()
+        self._reset_counters()
+
+    def _reset_counters(self) -> None:
+        self._stage_simulations = 0
+        self._stage_failures = 0
+        self._stage_resumed = 0
+        self._stage_start = time.perf_counter()
+        self.total_simulations = 0
+        self.total_failures = 0
+        self.total_resumed = 0
+        self.failure_kinds: Counter[str] = Counter()
+        self.failure_reasons: list[str] = []
+
+    def __getstate__(self) -> dict:
+        if self.checkpoint is not None:
+            raise ValueError(
+                "a ParallelIMH kernel with a checkpoint cannot run in another process; pass "
+                "cores=1 to pm.sample_smc (or use pymc_vcc.inference.pymc.smc.sample_smc_abc)"
+            )
+        state = self.__dict__.copy()
+        if not isinstance(self.executor, SerialExecutor):
+            warnings.warn(
+                "pm.sample_smc runs chains in separate (daemonic) processes here (cores > 1 and "
+                "chains > 1); they cannot use the executor, so each chain simulates its "
+                "particles one after another. Pass cores=1 (chains then run one after another, "
+                "each using the executor) or use pymc_vcc.inference.pymc.smc.sample_smc_abc.",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+        state["executor"] = SerialExecutor()
+        return state
+
+    def initialize(self, start: dict | None, rng: np.random.Generator) -> None:
+        # Simulation streams are children of the chain's seed: they neither consume nor shift
+        # the chain generator that drives proposals and resampling.
+        self._seeds = rng.bit_generator.seed_seq.spawn(1)[0]
+        self._reset_counters()
+        self._finished = self.checkpoint.load() if self.checkpoint is not None else {}
+        super().initialize(start, rng)
+
+    def _simulated_loglik(self, points: np.ndarray, prior_logp: np.ndarray) -> np.ndarray:
+        """Log-likelihood of points, simulating (in one batch) only those the prior allows and
+        the checkpoint does not hold yet."""
+        loglik = np.full(len(points), -np.inf)
+        allowed = np.flatnonzero(np.isfinite(prior_logp))
+        if allowed.size == 0:
+            return loglik
+        batch = points[allowed]
+        seeds = self._seeds.spawn(len(batch) * self._likelihood.n_nodes)
+        tasks = self._likelihood.tasks(batch, seeds)
+        keys = [
+            _simulation_key(batch[number % len(batch)], task[0], task[1])
+            for number, task in enumerate(tasks)
+        ]
+        records: list[LikelihoodRecord | None] = [self._finished.get(key) for key in keys]
+        todo = [number for number, record in enumerate(records) if record is None]
+        chunks = self.executor.imap_chunks(
+            partial(_simulate, self._likelihood.functions), (tasks[number] for number in todo)
+        )
+        try:
+            for chunk in chunks:
+                finished = []
+                for position, result in chunk:
+                    number = todo[position]
+                    outcome = crash_outcome(result) if isinstance(result, WorkerCrash) else result
+                    term = self._likelihood.term(
+                        tasks[number][0], batch[number % len(batch)], outcome
+                    )
+                    finished.append(
+                        LikelihoodRecord(
+                            keys[number], term, outcome.status, outcome.reason, outcome.elapsed
+                        )
+                    )
+                    records[number] = finished[-1]
+                if self.checkpoint is not None:
+                    self.checkpoint.append(finished)
+                    self._finished.update((record.key, record) for record in finished)
+        finally:
+            chunks.close()
+        for record in records:
+            if record.status != OK:
+                self.failure_kinds[record.status] += 1
+                if len(self.failure_reasons) < _MAX_REASONS:
+                    self.failure_reasons.append(f"{record.status}: {record.reason}")
+        failures = sum(record.status != OK for record in records)
+        resumed = len(tasks) - len(todo)
+        self._stage_simulations += len(todo)
+        self._stage_resumed += resumed
+        self._stage_failures += failures
+        self.total_simulations += len(todo)
+        self.total_resumed += resumed
+        self.total_failures += failures
+        loglik[allowed] = self._likelihood.evaluate(
+            batch,
+            np.array([record.loglik for record in records]),
+            np.array([record.status == OK for record in records]),
+        )
+        return loglik
+
+    def _initialize_kernel(self) -> None:
+        """Initial particles (prior draws or ``start``) with their prior and likelihood."""
+        population = self.start if self.start else self.initialize_population()
+        particles = [
+            DictToArrayBijection.map({v.name: population[v.name][i] for v in self.variables}).data
+            for i in range(self.draws)
+        ]
+        self.tempered_posterior = np.array(floatX(particles))
+        self.prior_logp = np.array(
+            [self.prior_logp_func(particle) for particle in self.tempered_posterior]
+        ).reshape(-1)
+        self.likelihood_logp = self._simulated_loglik(self.tempered_posterior, self.prior_logp)
+        if not np.isfinite(self.likelihood_logp).any():
+            raise RuntimeError(
+                f"all {self.draws} simulations of the initial population failed or have zero "
+                f"likelihood; failures: {dict(self.failure_kinds)}, e.g. "
+                f"{self.failure_reasons[:2]}. Check the simulator, the prior bounds and epsilon."
+            )
+
+    def mutate(self) -> None:
+        """Independent MH moves, each step's proposals simulated as one batch."""
+        self.n_steps = 1
+        old_correlation = 2
+        correlation = Pearson(self.tempered_posterior)
+        accepted_steps = []
+        while True:
+            log_uniform = np.log(self.rng.random(self.draws))
+            proposal = floatX(self.proposal_dist.rvs(size=self.draws, random_state=self.rng))
+            proposal = proposal.reshape(len(proposal), -1)
+            forward_logp = self.proposal_dist.logpdf(proposal)
+            backward_logp = self.proposal_dist.logpdf(self.tempered_posterior)
+            prior_logp = np.array([self.prior_logp_func(p) for p in proposal]).reshape(-1)
+            loglik = self._simulated_loglik(proposal, prior_logp)
+            proposal_logp = prior_logp + loglik * self.beta
+            accepted = log_uniform < (
+                (proposal_logp + backward_logp) - (self.tempered_posterior_logp + forward_logp)
+            )
+            self.tempered_posterior[accepted] = proposal[accepted]
+            self.tempered_posterior_logp[accepted] = proposal_logp[accepted]
+            self.prior_logp[accepted] = prior_logp[accepted]
+            self.likelihood_logp[accepted] = loglik[accepted]
+            accepted_steps.append(accepted)
+            self.n_steps += 1
+
+            pearson_r = correlation.get(self.tempered_posterior)
+            if np.mean((old_correlation - pearson_r) > self.correlation_threshold) > 0.9:
+                old_correlation = pearson_r
+            else:
+                break
+        self.acc_rate = np.mean(accepted_steps)
+
+    def sample_stats(self) -> dict[str, int | float]:
+        now = time.perf_counter()
+        stats = {
+            **super().sample_stats(),
+            "simulations": self._stage_simulations,
+            "failed_simulations": self._stage_failures,
+            "resumed_simulations": self._stage_resumed,
+            "stage_seconds": now - self._stage_start,
+        }
+        self._stage_simulations = 0
+        self._stage_failures = 0
+        self._stage_resumed = 0
+        self._stage_start = now
+        return stats
+
+    def sample_settings(self) -> dict[str, int | float | str]:
+        return {
+            **super().sample_settings(),
+            "n_simulations": self.total_simulations,
+            "n_failed_simulations": self.total_failures,
+            "n_resumed_simulations": self.total_resumed,
+            "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
+            "failure_examples": " | ".join(self.failure_reasons),
+            "executor": repr(self.executor),
+        }
+
+
+def _graph_digest(variables: Sequence) -> str:
+    """Digest of the graphs computing ``variables``: their operations and constants."""
+    digest = hashlib.sha256()
+    for variable in ancestors(variables):
+        if isinstance(variable, Constant):
+            data = np.asarray(variable.data)
+            digest.update(str(data).encode() if data.dtype == object else data.tobytes())
+        elif variable.owner is not None:
+            digest.update(str(variable.owner.op).encode())
+    return digest.hexdigest()
+
+
+def _describe(function: Callable[..., Any]) -> str:
+    target = function.simulator if isinstance(function, SimulatorFunction) else function
+    target = getattr(target, "func", target)  # functools.partial
+    name = getattr(target, "__qualname__", type(target).__qualname__)
+    return f"{getattr(target, '__module__', '')}.{name}"
+
+
+def _run_settings(
+    model: Model, draws: int, chains: int, threshold: float, correlation: float
+) -> dict[str, Any]:
+    """What a resumed run must share with the checkpointed one (besides the seed)."""
+    nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
+    return {
+        "sampler": "smc_abc",
+        "draws": int(draws),
+        "chains": int(chains),
+        "threshold": float(threshold),
+        "correlation_threshold": float(correlation),
+        "parameters": [rv.name for rv in model.free_RVs],
+        "prior_digest": _graph_digest(model.free_RVs),
+        "observed_digest": _graph_digest([model.rvs_to_values[rv] for rv in model.observed_RVs]),
+        "epsilon": [
+            float(getattr(rv.owner.op.epsilon, "data", rv.owner.op.epsilon)) for rv in nodes
+        ],
+        "simulator": [_describe(type(rv.owner.op).fn) for rv in nodes],
+        "likelihood_digest": _graph_digest(model.observed_RVs + model.potentials),
+    }
+
+
+def sample_smc_abc(
+    draws: int = 500,
+    *,
+    executor: Executor | ExecutorKind = "processes",
+    n_workers: int | None = None,
+    chains: int = 1,
+    random_seed: Any = None,
+    checkpoint: str | Path | None = None,
+    model: Model | None = None,
+    threshold: float = 0.5,
+    correlation_threshold: float = 0.01,
+    progressbar: bool = True,
+    **kwargs: Any,
+) -> DataTree:
+    """SMC-ABC of the current model with :class:`ParallelIMH` and defaults for costly simulators.
+
+    Args:
+        draws: particles per stage (and posterior draws per chain). A run costs about
+            draws × (1 + mutation steps over all stages) simulations, typically 10–40 × draws
+            (PyMC's default of 2000 is sized for cheap likelihoods).
+        executor: an open executor (left open), or a kind (``"serial"``, ``"processes"``,
+            ``"dask"`` for a new local cluster) opened for this call and closed after.
+        n_workers: workers of an executor opened here (default: every core).
+        chains: independent SMC runs, one after another, each using the whole executor
+            (default 1: see the module docstring for why).
+        random_seed: seeds everything (proposals, resampling and every simulation); an
+            integer (or None) with a checkpoint.
+        checkpoint: SQLite file persisting each finished simulation's log-likelihood term; a
+            run started again with the same arguments (and seed) resumes there and runs no
+            finished simulation again. A run with other settings is refused
+            (:class:`~pymc_vcc.execution.store.CheckpointMismatchError` naming them). Without
+            ``random_seed``, the seed is drawn once and kept in the checkpoint.
+        model: the PyMC model (default: the current context).
+        threshold, correlation_threshold: as for ``pm.sample_smc``'s IMH kernel.
+        progressbar: show PyMC's progress bar.
+        **kwargs: other ``pm.sample_smc`` arguments (``start``, ``idata_kwargs``, ...).
+
+    Returns:
+        The DataTree of ``pm.sample_smc`` (``posterior``, ``sample_stats`` with the
+        simulation counts, ``observed_data``).
+    """
+    if int(chains) != chains or chains < 1:
+        raise ValueError(f"chains must be a positive integer, got {chains}")
+    if int(draws) != draws or draws < 2:
+        raise ValueError(f"draws must be an integer >= 2, got {draws}")
+    kwargs.setdefault("compute_convergence_checks", chains > 1)
+    model = modelcontext(model)
+    store = None
+    if checkpoint is not None:
+        if random_seed is not None and (
+            isinstance(random_seed, bool)
+            or not isinstance(random_seed, int | np.integer)
+            or random_seed < 0
+        ):
+            raise ValueError(
+                f"random_seed must be a non-negative integer or None with a checkpoint, got "
+                f"{random_seed!r}"
+            )
+        settings = _run_settings(model, draws, chains, threshold, correlation_threshold)
+        store = LikelihoodStore(checkpoint, settings, random_seed)
+        random_seed = store.entropy
+    try:
+        with executor_scope(executor, n_workers) as opened, warnings.catch_warnings():
+            # The distance kernel is a Python Op by design: the simulations run outside PyTensor.
+            warnings.filterwarnings("ignore", "Numba will use object mode", UserWarning)
+            return pm.sample_smc(
+                draws=int(draws),
+                kernel=ParallelIMH,
+                chains=int(chains),
+                cores=1,
+                random_seed=random_seed,
+                model=model,
+                progressbar=progressbar,
+                executor=opened,
+                checkpoint=store,
+                threshold=threshold,
+                correlation_threshold=correlation_threshold,
+                **kwargs,
+            )
+    finally:
+        if store is not None:
+            store.close()
+
+
+__all__ = ["ParallelIMH", "sample_smc_abc"]

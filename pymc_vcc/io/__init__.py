@@ -1,0 +1,1 @@
+"""Measured data: logger files to SI inputs and observed outputs."""

@@ -1,0 +1,1 @@
+"""Physics: refrigerant properties, components, the cycle, the simulation driver."""

@@ -1,0 +1,57 @@
+"""Heat transfer: refrigerant-side HTC blended across phases, algebraic air side."""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from pymc_vcc.physics.components.smooth import smooth_step
+
+LIQUID_BLEND = (-0.05, 0.4)
+"""Quality range over which the HTC rises from the liquid to the two-phase value (the liquid
+film dominates at low quality, in evaporation and condensation alike)."""
+
+VAPOR_BLEND = (0.9, 1.05)
+"""Quality range of dry-out, from the two-phase to the vapour value."""
+
+
+@njit(cache=True, error_model="numpy")
+def refrigerant_htc(
+    quality: float,
+    htc_liquid: float,
+    htc_two_phase: float,
+    htc_vapor: float,
+    flow_ratio: float,
+) -> float:
+    """Refrigerant-side heat-transfer coefficient, W/(m² K).
+
+    The nominal liquid / two-phase / vapour values are blended with C¹ steps in the *unclipped*
+    quality over :data:`LIQUID_BLEND` and :data:`VAPOR_BLEND`, and scaled by (ṁ/ṁ_nom)^0.8
+    (Dittus–Boelter), with ``flow_ratio`` = |ṁ|/ṁ_nom softly floored at 0.05 so the wall never
+    decouples from the fluid.
+    """
+    to_two_phase = smooth_step((quality - LIQUID_BLEND[0]) / (LIQUID_BLEND[1] - LIQUID_BLEND[0]))
+    to_vapor = smooth_step((quality - VAPOR_BLEND[0]) / (VAPOR_BLEND[1] - VAPOR_BLEND[0]))
+    nominal = (
+        htc_liquid * (1.0 - to_two_phase)
+        + htc_two_phase * (to_two_phase - to_vapor)
+        + htc_vapor * to_vapor
+    )
+    ratio = math.sqrt(flow_ratio * flow_ratio + 0.05 * 0.05)
+    return nominal * ratio**0.8
+
+
+@njit(cache=True, error_model="numpy")
+def air_side_heat(
+    capacity_rate: float, T_air_in: float, T_wall: float, htc: float, area: float
+) -> float:
+    """Heat from an air stream to a wall at ``T_wall``, W (ε-NTU, wall isothermal):
+    Q = C (T_in - T_w)(1 - exp(-hA/C)) with C the air capacity rate in W/K."""
+    return capacity_rate * (T_air_in - T_wall) * (1.0 - math.exp(-htc * area / capacity_rate))
+
+
+@njit(cache=True, error_model="numpy")
+def wall_heat(htc: float, area: float, T_wall: float, T_fluid: float) -> float:
+    """Convective heat from a wall to a fluid, W."""
+    return htc * area * (T_wall - T_fluid)

@@ -1,0 +1,46 @@
+"""Refrigerant properties at (p, h) from fast tables built from CoolProp.
+
+``load_refrigerant(name)`` gives a :class:`Refrigerant` with a vectorised, range-checked Python
+API and its :class:`PropertyTables`, which the Numba kernels below take as first argument from
+inside ``@njit`` code (they return NaN outside the tables).
+"""
+
+from pymc_vcc.physics.refrigerant.fluid import (
+    DEFAULT_RESOLUTION,
+    SUPPORTED_FLUIDS,
+    Properties,
+    Refrigerant,
+    Saturation,
+    load_refrigerant,
+)
+from pymc_vcc.physics.refrigerant.kernels import (
+    enthalpy_bounds,
+    entropy,
+    h_from_ps,
+    h_from_pT,
+    p_sat_from_T,
+    saturation_state,
+    state,
+    state_array,
+)
+from pymc_vcc.physics.refrigerant.tables import FluidSpec, PropertyTables, TableResolution
+
+__all__ = [
+    "DEFAULT_RESOLUTION",
+    "SUPPORTED_FLUIDS",
+    "FluidSpec",
+    "Properties",
+    "PropertyTables",
+    "Refrigerant",
+    "Saturation",
+    "TableResolution",
+    "enthalpy_bounds",
+    "entropy",
+    "h_from_pT",
+    "h_from_ps",
+    "load_refrigerant",
+    "p_sat_from_T",
+    "saturation_state",
+    "state",
+    "state_array",
+]

@@ -1,0 +1,463 @@
+"""Numba kernels: refrigerant properties at (p, h) from :class:`PropertyTables`.
+
+Scalar floats in, floats out, SI units. Every kernel returns NaN (all of its outputs) when its
+input lies outside the tables, so a caller inside Numba can flag the failure; nothing is
+extrapolated.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from pymc_vcc.physics.refrigerant.tables import (
+    D_P,
+    D_P_XI,
+    D_XI,
+    H_LIQ,
+    H_MAX,
+    H_MIN,
+    H_VAP,
+    PROP_RHO,
+    PROP_S,
+    PROP_T,
+    RHO_LIQ,
+    RHO_VAP,
+    S_LIQ,
+    S_VAP,
+    T_BUBBLE,
+    T_DEW,
+    VALUE,
+    PropertyTables,
+)
+
+NAN = math.nan
+_MAX_ITERATIONS = 60
+
+
+@njit(cache=True)
+def _interval(grid: np.ndarray, x: float) -> int:
+    """Index i with grid[i] <= x <= grid[i + 1] for grid[0] <= x <= grid[-1] (bisection)."""
+    lo = 0
+    hi = grid.size - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if x < grid[mid]:
+            hi = mid
+        else:
+            lo = mid
+    return lo
+
+
+@njit(cache=True)
+def _hermite_basis(t: float) -> tuple[float, float, float, float, float, float, float, float]:
+    """Cubic Hermite basis h00, h10, h01, h11 at t in [0, 1] and their derivatives in t."""
+    t2 = t * t
+    t3 = t2 * t
+    return (
+        2.0 * t3 - 3.0 * t2 + 1.0,
+        t3 - 2.0 * t2 + t,
+        -2.0 * t3 + 3.0 * t2,
+        t3 - t2,
+        6.0 * t2 - 6.0 * t,
+        3.0 * t2 - 4.0 * t + 1.0,
+        -6.0 * t2 + 6.0 * t,
+        3.0 * t2 - 2.0 * t,
+    )
+
+
+@njit(cache=True)
+def _sat_locate(tables: PropertyTables, p: float) -> tuple[int, float, float]:
+    """Interval, width and local coordinate of p on the saturation nodes."""
+    i = _interval(tables.sat_p, p)
+    width = tables.sat_p[i + 1] - tables.sat_p[i]
+    return i, width, (p - tables.sat_p[i]) / width
+
+
+@njit(cache=True)
+def _sat_curve(
+    tables: PropertyTables, k: int, i: int, width: float, t: float
+) -> tuple[float, float]:
+    """Value and d/dp of saturation curve ``k`` at local coordinate t of interval i."""
+    h00, h10, h01, h11, d00, d10, d01, d11 = _hermite_basis(t)
+    c = tables.sat_curves
+    f0 = c[i, k, 0]
+    m0 = c[i, k, 1] * width
+    f1 = c[i + 1, k, 0]
+    m1 = c[i + 1, k, 1] * width
+    value = h00 * f0 + h10 * m0 + h01 * f1 + h11 * m1
+    slope = (d00 * f0 + d10 * m0 + d01 * f1 + d11 * m1) / width
+    return value, slope
+
+
+@njit(cache=True)
+def _bicubic(
+    table: np.ndarray, k: int, i: int, j: int, dp: float, dxi: float, t: float, r: float
+) -> tuple[float, float, float]:
+    """Property k of a single-phase table: value, d/dp at constant xi, d/dxi at constant p."""
+    a00, a10, a01, a11, da00, da10, da01, da11 = _hermite_basis(t)
+    b00, b10, b01, b11, db00, db10, db01, db11 = _hermite_basis(r)
+    value = 0.0
+    d_p = 0.0
+    d_xi = 0.0
+    for corner_p in range(2):
+        if corner_p == 0:
+            hp, gp, dhp, dgp = a00, a10 * dp, da00 / dp, da10
+        else:
+            hp, gp, dhp, dgp = a01, a11 * dp, da01 / dp, da11
+        for corner_xi in range(2):
+            if corner_xi == 0:
+                hx, gx, dhx, dgx = b00, b10 * dxi, db00 / dxi, db10
+            else:
+                hx, gx, dhx, dgx = b01, b11 * dxi, db01 / dxi, db11
+            node = table[i + corner_p, j + corner_xi, k]
+            f = node[VALUE]
+            f_p = node[D_P]
+            f_x = node[D_XI]
+            f_px = node[D_P_XI]
+            value += hp * hx * f + gp * hx * f_p + hp * gx * f_x + gp * gx * f_px
+            d_p += dhp * hx * f + dgp * hx * f_p + dhp * gx * f_x + dgp * gx * f_px
+            d_xi += hp * dhx * f + gp * dhx * f_p + hp * dgx * f_x + gp * dgx * f_px
+    return value, d_p, d_xi
+
+
+@njit(cache=True)
+def _region(
+    tables: PropertyTables, p: float, h: float, i: int, width: float, t: float, liquid: bool
+) -> tuple[np.ndarray, int, int, float, float, float, float, float, float]:
+    """Locate (p, h) in the liquid or vapour table.
+
+    Returns the table, cell indices, cell sizes, local coordinates, the width w of the region
+    at p and the derivative d xi/dp at constant h.
+    """
+    if liquid:
+        a, a_p = _sat_curve(tables, H_MIN, i, width, t)
+        b, b_p = _sat_curve(tables, H_LIQ, i, width, t)
+        table = tables.liquid
+        xi_nodes = tables.liquid_xi
+    else:
+        a, a_p = _sat_curve(tables, H_VAP, i, width, t)
+        b, b_p = _sat_curve(tables, H_MAX, i, width, t)
+        table = tables.vapour
+        xi_nodes = tables.vapour_xi
+    w = b - a
+    xi = (h - a) / w
+    xi_p = -(a_p + xi * (b_p - a_p)) / w
+    ip = _interval(tables.table_p, p)
+    dp = tables.table_p[ip + 1] - tables.table_p[ip]
+    jx = _interval(xi_nodes, xi)
+    dxi = xi_nodes[jx + 1] - xi_nodes[jx]
+    tp = (p - tables.table_p[ip]) / dp
+    rx = (xi - xi_nodes[jx]) / dxi
+    return table, ip, jx, dp, dxi, tp, rx, w, xi_p
+
+
+@njit(cache=True)
+def _in_range(tables: PropertyTables, p: float) -> bool:
+    return p >= tables.p_min and p <= tables.p_max
+
+
+@njit(cache=True)
+def state(tables: PropertyTables, p: float, h: float) -> tuple[float, float, float, float, float]:
+    """(T, rho, drho_dp, drho_dh, x) at (p, h).
+
+    K, kg/m3, kg/m3/Pa at constant h, kg/m3/(J/kg) at constant p, and the unclipped quality
+    x = (h - h_l)/(h_v - h_l). NaNs outside the tables.
+    """
+    if not _in_range(tables, p):
+        return NAN, NAN, NAN, NAN, NAN
+    i, width, t = _sat_locate(tables, p)
+    h_min, _ = _sat_curve(tables, H_MIN, i, width, t)
+    h_max, _ = _sat_curve(tables, H_MAX, i, width, t)
+    if not (h >= h_min and h <= h_max):
+        return NAN, NAN, NAN, NAN, NAN
+    h_l, h_l_p = _sat_curve(tables, H_LIQ, i, width, t)
+    h_v, h_v_p = _sat_curve(tables, H_VAP, i, width, t)
+    x = (h - h_l) / (h_v - h_l)
+    if h < h_l or h > h_v:
+        table, ip, jx, dp, dxi, tp, rx, w, xi_p = _region(tables, p, h, i, width, t, h < h_l)
+        T, _, _ = _bicubic(table, PROP_T, ip, jx, dp, dxi, tp, rx)
+        rho, rho_p, rho_xi = _bicubic(table, PROP_RHO, ip, jx, dp, dxi, tp, rx)
+        return T, rho, rho_p + rho_xi * xi_p, rho_xi / w, x
+    T_b, _ = _sat_curve(tables, T_BUBBLE, i, width, t)
+    T_d, _ = _sat_curve(tables, T_DEW, i, width, t)
+    rho_l, rho_l_p = _sat_curve(tables, RHO_LIQ, i, width, t)
+    rho_v, rho_v_p = _sat_curve(tables, RHO_VAP, i, width, t)
+    v_l = 1.0 / rho_l
+    v_v = 1.0 / rho_v
+    v_l_p = -rho_l_p * v_l * v_l
+    v_v_p = -rho_v_p * v_v * v_v
+    dh = h_v - h_l
+    x_p = -(h_l_p + x * (h_v_p - h_l_p)) / dh
+    v = v_l + x * (v_v - v_l)
+    rho = 1.0 / v
+    v_p = v_l_p + x * (v_v_p - v_l_p) + (v_v - v_l) * x_p
+    v_h = (v_v - v_l) / dh
+    return T_b + x * (T_d - T_b), rho, -rho * rho * v_p, -rho * rho * v_h, x
+
+
+@njit(cache=True)
+def saturation_state(tables: PropertyTables, p: float) -> tuple[float, float, float, float, float]:
+    """(T_sat, h_l, h_v, rho_l, rho_v) at p; T_sat is the mid-glide temperature.
+
+    For a pure fluid bubble and dew temperatures coincide; CoolProp's pseudo-pure R410A has a
+    glide of about 0.1 K, and T_sat is their mean. NaNs outside the tables.
+    """
+    if not _in_range(tables, p):
+        return NAN, NAN, NAN, NAN, NAN
+    i, width, t = _sat_locate(tables, p)
+    T_b, _ = _sat_curve(tables, T_BUBBLE, i, width, t)
+    T_d, _ = _sat_curve(tables, T_DEW, i, width, t)
+    h_l, _ = _sat_curve(tables, H_LIQ, i, width, t)
+    h_v, _ = _sat_curve(tables, H_VAP, i, width, t)
+    rho_l, _ = _sat_curve(tables, RHO_LIQ, i, width, t)
+    rho_v, _ = _sat_curve(tables, RHO_VAP, i, width, t)
+    return 0.5 * (T_b + T_d), h_l, h_v, rho_l, rho_v
+
+
+@njit(cache=True)
+def enthalpy_bounds(tables: PropertyTables, p: float) -> tuple[float, float]:
+    """(h_min, h_max): the enthalpies of the T_min and T_max isotherms at p, J/kg; NaN outside."""
+    if not _in_range(tables, p):
+        return NAN, NAN
+    i, width, t = _sat_locate(tables, p)
+    h_min, _ = _sat_curve(tables, H_MIN, i, width, t)
+    h_max, _ = _sat_curve(tables, H_MAX, i, width, t)
+    return h_min, h_max
+
+
+@njit(cache=True)
+def entropy(tables: PropertyTables, p: float, h: float) -> float:
+    """Specific entropy at (p, h), J/(kg K); NaN outside the tables."""
+    if not _in_range(tables, p):
+        return NAN
+    i, width, t = _sat_locate(tables, p)
+    h_min, _ = _sat_curve(tables, H_MIN, i, width, t)
+    h_max, _ = _sat_curve(tables, H_MAX, i, width, t)
+    if not (h >= h_min and h <= h_max):
+        return NAN
+    h_l, _ = _sat_curve(tables, H_LIQ, i, width, t)
+    h_v, _ = _sat_curve(tables, H_VAP, i, width, t)
+    if h < h_l or h > h_v:
+        table, ip, jx, dp, dxi, tp, rx, _, _ = _region(tables, p, h, i, width, t, h < h_l)
+        s, _, _ = _bicubic(table, PROP_S, ip, jx, dp, dxi, tp, rx)
+        return s
+    s_l, _ = _sat_curve(tables, S_LIQ, i, width, t)
+    s_v, _ = _sat_curve(tables, S_VAP, i, width, t)
+    return s_l + (h - h_l) / (h_v - h_l) * (s_v - s_l)
+
+
+@njit(cache=True)
+def _invert_region(tables: PropertyTables, p: float, k: int, target: float, liquid: bool) -> float:
+    """The xi in [0, 1] of the liquid or vapour table where property k equals target at p.
+
+    Property k must increase with xi (T and s do); NaN when target lies outside its values at
+    xi = 0 and xi = 1 (beyond round-off). Newton steps, bisection when a step leaves the bracket.
+    """
+    table = tables.liquid if liquid else tables.vapour
+    xi_nodes = tables.liquid_xi if liquid else tables.vapour_xi
+    ip = _interval(tables.table_p, p)
+    dp = tables.table_p[ip + 1] - tables.table_p[ip]
+    tp = (p - tables.table_p[ip]) / dp
+    last = xi_nodes.size - 2
+    f_lo, _, _ = _bicubic(table, k, ip, 0, dp, xi_nodes[1] - xi_nodes[0], tp, 0.0)
+    f_hi, _, _ = _bicubic(table, k, ip, last, dp, xi_nodes[last + 1] - xi_nodes[last], tp, 1.0)
+    slack = 1e-8 * (abs(f_lo) + abs(f_hi))  # T at xi = 0, 1 is T_min, T_max to ~1e-7 K
+    if not (target >= f_lo - slack and target <= f_hi + slack):
+        return NAN
+    if target <= f_lo:
+        return 0.0
+    if target >= f_hi:
+        return 1.0
+    lo = 0.0
+    hi = 1.0
+    xi = (target - f_lo) / (f_hi - f_lo)
+    for _ in range(_MAX_ITERATIONS):
+        jx = _interval(xi_nodes, xi)
+        dxi = xi_nodes[jx + 1] - xi_nodes[jx]
+        f, _, f_xi = _bicubic(table, k, ip, jx, dp, dxi, tp, (xi - xi_nodes[jx]) / dxi)
+        residual = f - target
+        if residual > 0.0:
+            hi = xi
+        else:
+            lo = xi
+        new = xi - residual / f_xi if f_xi > 0.0 else 0.5 * (lo + hi)
+        if not (new >= lo and new <= hi):
+            new = 0.5 * (lo + hi)
+        if abs(new - xi) < 1e-13:
+            return new
+        xi = new
+    return xi
+
+
+@njit(cache=True)
+def _h_from_property(tables: PropertyTables, p: float, k: int, target: float) -> float:
+    """Enthalpy at p where property k (T or s, both increasing with h) equals target; NaN if none.
+
+    Between the bubble and dew values (two-phase) the enthalpy follows the lever rule, which is
+    how HEOS spreads CoolProp's pseudo-pure temperature glide and the entropy across the dome.
+    """
+    if not _in_range(tables, p):
+        return NAN
+    i, width, t = _sat_locate(tables, p)
+    if k == PROP_T:
+        low, _ = _sat_curve(tables, T_BUBBLE, i, width, t)
+        high, _ = _sat_curve(tables, T_DEW, i, width, t)
+    else:
+        low, _ = _sat_curve(tables, S_LIQ, i, width, t)
+        high, _ = _sat_curve(tables, S_VAP, i, width, t)
+    h_l, _ = _sat_curve(tables, H_LIQ, i, width, t)
+    h_v, _ = _sat_curve(tables, H_VAP, i, width, t)
+    if target < low:
+        h_min, _ = _sat_curve(tables, H_MIN, i, width, t)
+        return h_min + _invert_region(tables, p, k, target, True) * (h_l - h_min)
+    if target < high:
+        return h_l + (target - low) / (high - low) * (h_v - h_l)
+    if target == high:
+        return h_v
+    h_max, _ = _sat_curve(tables, H_MAX, i, width, t)
+    return h_v + _invert_region(tables, p, k, target, False) * (h_max - h_v)
+
+
+@njit(cache=True)
+def h_from_pT(tables: PropertyTables, p: float, T: float) -> float:
+    """Enthalpy at (p, T), J/kg: liquid below the bubble point, vapour from the dew point up.
+
+    For a pure fluid T = T_sat gives the saturated vapour; within CoolProp's ~0.1 K R410A glide
+    it gives the two-phase state at that temperature. NaN outside [T_min, T_max] or the
+    pressure range.
+    """
+    return _h_from_property(tables, p, PROP_T, T)
+
+
+@njit(cache=True)
+def h_from_ps(tables: PropertyTables, p: float, s: float) -> float:
+    """Enthalpy at (p, s), J/kg (e.g. the isentropic compressor outlet); NaN outside the tables."""
+    return _h_from_property(tables, p, PROP_S, s)
+
+
+@njit(cache=True)
+def _t_sat_node(curves: np.ndarray, i: int, column: int) -> float:
+    """Mid-glide saturation temperature (column 0) or its d/dp (column 1) at saturation node i."""
+    return 0.5 * (curves[i, T_BUBBLE, column] + curves[i, T_DEW, column])
+
+
+@njit(cache=True)
+def p_sat_from_T(tables: PropertyTables, T: float) -> float:
+    """Saturation pressure at T (the mid-glide temperature of saturation_state), Pa; NaN outside."""
+    c = tables.sat_curves
+    if not (_t_sat_node(c, 0, 0) <= T <= _t_sat_node(c, c.shape[0] - 1, 0)):
+        return NAN
+    lo = 0
+    hi = c.shape[0] - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if _t_sat_node(c, mid, 0) > T:
+            hi = mid
+        else:
+            lo = mid
+    width = tables.sat_p[lo + 1] - tables.sat_p[lo]
+    f0 = _t_sat_node(c, lo, 0)
+    f1 = _t_sat_node(c, lo + 1, 0)
+    m0 = _t_sat_node(c, lo, 1) * width
+    m1 = _t_sat_node(c, lo + 1, 1) * width
+    a = 0.0
+    b = 1.0
+    r = (T - f0) / (f1 - f0)
+    for _ in range(_MAX_ITERATIONS):
+        h00, h10, h01, h11, d00, d10, d01, d11 = _hermite_basis(r)
+        residual = h00 * f0 + h10 * m0 + h01 * f1 + h11 * m1 - T
+        slope = d00 * f0 + d10 * m0 + d01 * f1 + d11 * m1
+        if residual > 0.0:
+            b = r
+        else:
+            a = r
+        new = r - residual / slope if slope > 0.0 else 0.5 * (a + b)
+        if not (new >= a and new <= b):
+            new = 0.5 * (a + b)
+        if abs(new - r) < 1e-14:
+            r = new
+            break
+        r = new
+    return tables.sat_p[lo] + r * width
+
+
+@njit(cache=True)
+def state_array(tables: PropertyTables, p: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """:func:`state` over 1-D arrays p and h of equal length: rows T, rho, drho_dp, drho_dh, x.
+
+    Shape (5, n); NaN columns where (p, h) is outside the tables.
+    """
+    out = np.empty((5, p.size))
+    for k in range(p.size):
+        out[0, k], out[1, k], out[2, k], out[3, k], out[4, k] = state(tables, p[k], h[k])
+    return out
+
+
+@njit(cache=True)
+def props_array(tables: PropertyTables, p: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """:func:`state` and :func:`entropy` over 1-D arrays: rows T, rho, drho_dp, drho_dh, x, s.
+
+    Shape (6, n); NaN columns where (p, h) is outside the tables.
+    """
+    out = np.empty((6, p.size))
+    for k in range(p.size):
+        out[0, k], out[1, k], out[2, k], out[3, k], out[4, k] = state(tables, p[k], h[k])
+        out[5, k] = entropy(tables, p[k], h[k])
+    return out
+
+
+@njit(cache=True)
+def entropy_array(tables: PropertyTables, p: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """:func:`entropy` over 1-D arrays of equal length, J/(kg K)."""
+    out = np.empty(p.size)
+    for k in range(p.size):
+        out[k] = entropy(tables, p[k], h[k])
+    return out
+
+
+@njit(cache=True)
+def h_from_pT_array(tables: PropertyTables, p: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """:func:`h_from_pT` over 1-D arrays of equal length, J/kg."""
+    out = np.empty(p.size)
+    for k in range(p.size):
+        out[k] = h_from_pT(tables, p[k], T[k])
+    return out
+
+
+@njit(cache=True)
+def h_from_ps_array(tables: PropertyTables, p: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """:func:`h_from_ps` over 1-D arrays of equal length, J/kg."""
+    out = np.empty(p.size)
+    for k in range(p.size):
+        out[k] = h_from_ps(tables, p[k], s[k])
+    return out
+
+
+@njit(cache=True)
+def p_sat_from_T_array(tables: PropertyTables, T: np.ndarray) -> np.ndarray:
+    """:func:`p_sat_from_T` over a 1-D array, Pa."""
+    out = np.empty(T.size)
+    for k in range(T.size):
+        out[k] = p_sat_from_T(tables, T[k])
+    return out
+
+
+@njit(cache=True)
+def enthalpy_bounds_array(tables: PropertyTables, p: np.ndarray) -> np.ndarray:
+    """:func:`enthalpy_bounds` over a 1-D array: rows h_min, h_max, shape (2, n), J/kg."""
+    out = np.empty((2, p.size))
+    for k in range(p.size):
+        out[0, k], out[1, k] = enthalpy_bounds(tables, p[k])
+    return out
+
+
+@njit(cache=True)
+def saturation_array(tables: PropertyTables, p: np.ndarray) -> np.ndarray:
+    """:func:`saturation_state` over a 1-D array: rows T_sat, h_l, h_v, rho_l, rho_v; (5, n)."""
+    out = np.empty((5, p.size))
+    for k in range(p.size):
+        out[0, k], out[1, k], out[2, k], out[3, k], out[4, k] = saturation_state(tables, p[k])
+    return out

@@ -1,0 +1,419 @@
+"""Simulation driver: scipy's Radau, step by step, restarted at every input step.
+
+:func:`simulate` never raises for a run that goes wrong: it returns the output Dataset flagged
+``status = "failed"`` with a ``failure_reason`` (solver failure, non-finite state, property out of
+range, wall-clock limit, charge that does not fit), outputs NaN from the failure on. Bad
+*arguments* (unknown parameter ids, invalid inputs) do raise, before anything runs.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+from scipy.integrate import Radau
+from scipy.linalg import get_lapack_funcs
+from threadpoolctl import ThreadpoolController
+
+from pymc_vcc.physics.cycle import (
+    C_M0,
+    DIAGNOSTIC_INFO,
+    N_EVAL,
+    OUTPUT_IDS,
+    OUTPUT_INFO,
+    build_constants,
+    evaluate,
+    initial_state,
+    jacobian,
+    n_states,
+    outputs_along,
+    state_slices,
+)
+from pymc_vcc.physics.inputs import (
+    INPUT_IDS,
+    builtin_inputs,
+    input_segments,
+    validate_inputs,
+    window,
+)
+from pymc_vcc.physics.unit import Unit, load_unit
+
+
+@functools.lru_cache(maxsize=8)
+def _fluid(name: str):
+    from pymc_vcc.physics.refrigerant import load_refrigerant
+
+    return load_refrigerant(name)
+
+
+@functools.lru_cache(maxsize=1)
+def _builtin_unit() -> Unit:
+    return load_unit()
+
+
+class _WallClockLimit(Exception):
+    """Raised from inside a solver step when the run exceeds its wall-clock limit."""
+
+
+_THREADPOOLS = ThreadpoolController()
+"""BLAS runs single-threaded inside a simulation: its small LU factorisations only lose by
+threading (five times slower at 126 states on a busy 2-core machine), and samplers run one
+simulation per core anyway."""
+
+
+def _tolerances(unit: Unit) -> np.ndarray:
+    n = unit.discretisation.n_volumes
+    s = state_slices(n)
+    solver = unit.solver
+    atol = np.empty(n_states(n))
+    atol[[s["p_cond"], s["p_evap"]]] = solver.atol_pressure
+    for key in ("h_cond", "h_liquid_line", "h_evap", "h_vapor_line", "h_tank"):
+        atol[s[key]] = solver.atol_enthalpy
+    atol[s["Tw_cond"]] = solver.atol_temperature
+    atol[s["Tw_evap"]] = solver.atol_temperature
+    atol[s["z"]] = 1e-4
+    return atol
+
+
+def _empty_result(times: np.ndarray, diagnostics: bool) -> dict[str, np.ndarray]:
+    names = list(OUTPUT_IDS) + (list(DIAGNOSTIC_INFO) if diagnostics else [])
+    return {name: np.full(times.size, np.nan) for name in names}
+
+
+def simulate(
+    unit: Unit | None = None,
+    params: Mapping[str, float] | None = None,
+    inputs: xr.Dataset | None = None,
+    *,
+    t_end: float | None = None,
+    output_interval: float | None = None,
+    controller: bool | None = None,
+    diagnostics: bool = False,
+    max_wall_time: float | None = None,
+) -> xr.Dataset:
+    """Simulate the cycle and return the nine outputs on a regular time grid.
+
+    Parameters
+    ----------
+    unit
+        Unit description (default: the built-in 3.5 kW R410A split).
+    params
+        Table III parameter values by id; missing ids take their nominal value.
+    inputs
+        Input profile (default: the built-in 2120 s step profile), see
+        :mod:`pymc_vcc.physics.inputs`.
+    t_end
+        Simulate ``[0, t_end]`` s only (default: the whole profile).
+    output_interval
+        Output grid spacing, s (default: the unit's ``solver.output_interval``).
+    controller
+        Switch the virtual PI charge controller on/off (default: the unit's setting).
+    diagnostics
+        Also return heats, powers, total mass and controller source (see ``DIAGNOSTIC_INFO``).
+    max_wall_time
+        Wall-clock limit in s (default: the unit's ``solver.max_wall_time``).
+
+    Returns
+    -------
+    xarray.Dataset
+        Variables ``TD, PD, TS, PS, TC, PC, TE, PE, MDOT`` over ``time`` with ``units`` attrs;
+        attrs ``status`` ("ok" | "failed"), ``failure_reason``, ``n_rhs``, ``n_jac``,
+        ``n_steps``, ``wall_time`` (s), ``mass_error`` (max |M - M0|/M0 on the grid),
+        ``source_integral`` (∫|ṁ_src| dt, kg).
+    """
+    started = time.perf_counter()
+    unit = _builtin_unit() if unit is None else unit
+    inputs = builtin_inputs() if inputs is None else inputs
+    validate_inputs(inputs)
+    if t_end is not None:
+        inputs = window(inputs, float(t_end))
+    theta = unit.parameters.vector(params)
+    dt = unit.solver.output_interval if output_interval is None else float(output_interval)
+    if not dt > 0:
+        raise ValueError(f"output_interval must be positive, got {dt}")
+    limit = unit.solver.max_wall_time if max_wall_time is None else float(max_wall_time)
+
+    edges, held = input_segments(inputs)
+    times = np.arange(0.0, edges[-1] + 1e-9 * edges[-1], dt)
+    tables = _fluid(unit.refrigerant).tables
+    c = build_constants(unit, theta, controller)
+    n = unit.discretisation.n_volumes
+    atol = _tolerances(unit)
+
+    states = np.full((times.size, n_states(n)), np.nan)
+    controls = np.empty((times.size, len(INPUT_IDS)))
+    segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
+    controls[:] = held[segment_of]
+    stats = {"n_rhs": 0, "n_jac": 0, "n_steps": 0, "bad_rhs": 0}
+    reason = ""
+    try:
+        y = initial_state(c, n, held[0][2], held[0][3], tables)
+    except Exception as error:  # any numerical trouble is a failed run, never an exception
+        y = None
+        reason = f"initial state: {error}"
+    if y is not None:
+        with _THREADPOOLS.limit(limits=1, user_api="blas"):
+            reason = _integrate(
+                y, c, tables, edges, held, times, states, atol, unit, limit, started, stats
+            )
+
+    values = _empty_result(times, diagnostics)
+    done = np.isfinite(states).all(axis=1)
+    if done.any():
+        evaluated = np.full((times.size, N_EVAL), np.nan)
+        evaluated[done] = outputs_along(states[done], controls[done], c, tables)
+        for k, name in enumerate(values):
+            values[name] = evaluated[:, k]
+        mass = evaluated[done, len(OUTPUT_IDS) + list(DIAGNOSTIC_INFO).index("M")]
+        source = evaluated[done, len(OUTPUT_IDS) + list(DIAGNOSTIC_INFO).index("mdot_src")]
+        mass_error = float(np.max(np.abs(mass - c[C_M0])) / c[C_M0])
+        source_integral = float(np.trapezoid(np.abs(source), times[done]))
+    else:
+        mass_error = float("nan")
+        source_integral = float("nan")
+    if not reason and not np.isfinite(np.column_stack(list(values.values()))).all():
+        reason = "non-finite outputs"
+    info = {**OUTPUT_INFO, **DIAGNOSTIC_INFO}
+    dataset = xr.Dataset(
+        {
+            name: ("time", data, {"units": info[name][1], "long_name": info[name][0]})
+            for name, data in values.items()
+        },
+        coords={"time": ("time", times, {"units": "s"})},
+        attrs={
+            "status": "failed" if reason else "ok",
+            "failure_reason": reason,
+            "n_rhs": stats["n_rhs"],
+            "n_jac": stats["n_jac"],
+            "n_steps": stats["n_steps"],
+            "n_states": n_states(n),
+            "wall_time": time.perf_counter() - started,
+            "mass_error": mass_error,
+            "source_integral": source_integral,
+            "unit": unit.name,
+        },
+    )
+    return dataset
+
+
+def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, started, stats):
+    """Fill ``states`` on ``times`` segment by segment; return a failure reason or ""."""
+    dydt = np.empty(y.size)
+    out = np.empty(N_EVAL)
+    solver_settings = unit.solver
+    for k, u in enumerate(held):
+        t0, t1 = float(edges[k]), float(edges[k + 1])
+        last = k == len(held) - 1
+
+        def fun(t, state, u=u):
+            stats["n_rhs"] += 1
+            if not evaluate(state, u, c, tables, dydt, out):
+                stats["bad_rhs"] += 1
+            if time.perf_counter() - started > limit:  # also stops a step that never ends
+                raise _WallClockLimit
+            return dydt.copy()
+
+        def jac(t, state, u=u):
+            stats["n_jac"] += 1
+            evaluate(state, u, c, tables, dydt, out)
+            matrix = jacobian(state, u, c, tables, dydt.copy())
+            # columns that left the property tables: let the step-size control back off
+            return np.nan_to_num(matrix, nan=0.0, posinf=0.0, neginf=0.0)
+
+        in_segment = (times >= t0) & ((times < t1) | (last & (times <= t1)))
+        pending = np.flatnonzero(in_segment)
+        if pending.size and times[pending[0]] == t0:
+            states[pending[0]] = y
+            pending = pending[1:]
+        if not evaluate(y, u, c, tables, dydt, out):
+            return f"right-hand side not finite at t = {t0:.1f} s (property out of range)"
+        try:
+            solver = Radau(
+                fun,
+                t0,
+                y,
+                t1,
+                rtol=solver_settings.rtol,
+                atol=atol,
+                jac=jac,
+                max_step=solver_settings.max_step,
+            )
+        except _WallClockLimit:
+            return f"wall-clock limit of {limit:.1f} s reached at t = {t0:.1f} s"
+        except Exception as error:
+            return f"solver start at t = {t0:.1f} s: {type(error).__name__}: {error}"
+        _use_direct_lapack(solver)
+        while solver.status == "running":
+            try:
+                message = solver.step()
+            except _WallClockLimit:
+                return f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s"
+            except Exception as error:
+                return f"solver failure at t = {solver.t:.2f} s: {type(error).__name__}: {error}"
+            stats["n_steps"] += 1
+            if solver.status == "failed":
+                why = message or "Radau failed"
+                if stats["bad_rhs"]:
+                    why += f" (property out of range in {stats['bad_rhs']} evaluations)"
+                return f"solver failure at t = {solver.t:.2f} s: {why}"
+            if not np.isfinite(solver.y).all():
+                return f"non-finite state at t = {solver.t:.2f} s"
+            if pending.size:
+                ready = pending[times[pending] <= solver.t]
+                if ready.size:
+                    states[ready] = solver.dense_output()(times[ready]).T
+                    pending = pending[ready.size :]
+            if time.perf_counter() - started > limit:
+                return f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s"
+        y = solver.y
+    return ""
+
+
+_LAPACK_REAL = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1),))
+_LAPACK_COMPLEX = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1, dtype=complex),))
+
+
+def _use_direct_lapack(solver: Radau) -> None:
+    """Give scipy's Radau direct LAPACK getrf/getrs for its dense LU work.
+
+    Same factorisations as ``scipy.linalg.lu_factor``/``lu_solve`` without their per-call
+    argument checking, which costs more than the 46 x 46 factorisation itself.
+    """
+
+    def lu(matrix):
+        solver.nlu += 1
+        getrf, getrs = _LAPACK_COMPLEX if np.iscomplexobj(matrix) else _LAPACK_REAL
+        factors, pivots, _ = getrf(matrix, overwrite_a=True)
+        return factors, pivots, getrs
+
+    def solve_lu(decomposition, rhs):
+        factors, pivots, getrs = decomposition
+        return getrs(factors, pivots, rhs)[0]
+
+    solver.lu = lu
+    solver.solve_lu = solve_lu
+
+
+class VCCSimulator:
+    """A picklable simulator for the samplers: ``simulator(theta, rng) -> xarray.Dataset``.
+
+    Parameters not in ``theta`` take their nominal values; the simulation is deterministic
+    (``rng`` is accepted for the interface). Failed runs are returned flagged in attrs, never
+    raised. ``outputs`` selects output ids; ``t_window = (t_start, t_end)`` simulates up to
+    ``t_end`` and returns the outputs from ``t_start`` on. ``parameters`` names the ids a
+    sampler calibrates (default: all 26); the others stay at nominal, or at ``fixed`` values.
+    """
+
+    def __init__(
+        self,
+        unit: Unit | None = None,
+        inputs: xr.Dataset | None = None,
+        outputs: Sequence[str] | None = None,
+        t_window: tuple[float, float] | None = None,
+        *,
+        controller: bool | None = None,
+        max_wall_time: float | None = None,
+        parameters: Sequence[str] | None = None,
+        fixed: Mapping[str, float] | None = None,
+    ) -> None:
+        self.unit = load_unit() if unit is None else unit
+        self.inputs = builtin_inputs() if inputs is None else inputs
+        validate_inputs(self.inputs)
+        selected = tuple(OUTPUT_IDS if outputs is None else outputs)
+        unknown = [name for name in selected if name not in OUTPUT_IDS]
+        if unknown or not selected:
+            raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(OUTPUT_IDS)}")
+        self.output_names: tuple[str, ...] = selected
+        all_ids = self.unit.parameters.ids
+        self.parameter_names: tuple[str, ...] = all_ids if parameters is None else tuple(parameters)
+        self.fixed: dict[str, float] = dict(fixed or {})
+        for what, names in (("parameters", self.parameter_names), ("fixed", self.fixed)):
+            unknown = [name for name in names if name not in all_ids]
+            if unknown:
+                raise ValueError(f"unknown {what} id(s) {unknown}; allowed are {list(all_ids)}")
+        self.unit.parameters.vector(self.fixed, check_bounds=True)
+        end = float(self.inputs["time"].values[-1])
+        if t_window is None:
+            t_window = (0.0, end)
+        t_start, t_stop = map(float, t_window)
+        if not 0.0 <= t_start < t_stop <= end:
+            raise ValueError(f"t_window {t_window} must satisfy 0 <= start < end <= {end} s")
+        self.t_window = (t_start, t_stop)
+        self.controller = controller
+        self.max_wall_time = max_wall_time
+
+    def __call__(
+        self, theta: Mapping[str, float], rng: np.random.Generator | None = None
+    ) -> xr.Dataset:
+        """Simulate with parameters ``theta`` (id -> value) and return the selected outputs."""
+        result = simulate(
+            self.unit,
+            {**self.fixed, **theta},
+            self.inputs,
+            t_end=self.t_window[1],
+            controller=self.controller,
+            max_wall_time=self.max_wall_time,
+        )
+        result = result[list(self.output_names)]
+        return result.sel(time=slice(self.t_window[0], None))
+
+    def __repr__(self) -> str:
+        return (
+            f"VCCSimulator(unit={self.unit.name!r}, outputs={list(self.output_names)}, "
+            f"t_window={self.t_window})"
+        )
+
+
+def operating_point(
+    unit: Unit | None = None,
+    params: Mapping[str, float] | None = None,
+    *,
+    duration: float = 1500.0,
+    controller: bool | None = None,
+    **conditions: float,
+) -> dict[str, float | str]:
+    """The (near) steady state reached after ``duration`` s at constant inputs.
+
+    ``conditions`` override the unit's rating point (``valve_opening``, ``compressor_speed``,
+    ``T_ambient``, ``T_indoor``, SI). Returns the nine outputs and the diagnostics at the end,
+    plus ``superheat`` (K, at the suction), ``subcooling`` (K, condenser outlet), ``capacity``
+    (W, evaporator heat), ``COP`` (capacity over compressor and fan power),
+    ``energy_balance_error`` ((Q_cond - Q_evap - W_ref) / Q_cond), ``drift`` (largest relative
+    change of an output over the last 100 s) and the run's ``status``/``failure_reason``.
+    """
+    from pymc_vcc.physics.inputs import constant_inputs
+    from pymc_vcc.physics.refrigerant import saturation_state
+
+    unit = _builtin_unit() if unit is None else unit
+    unknown = sorted(set(conditions) - set(INPUT_IDS))
+    if unknown:
+        raise ValueError(f"unknown condition(s) {unknown}; allowed are {list(INPUT_IDS)}")
+    point = {name: getattr(unit.rating, name) for name in INPUT_IDS} | conditions
+    result = simulate(
+        unit,
+        params,
+        constant_inputs(duration, **point),
+        diagnostics=True,
+        controller=controller,
+        output_interval=10.0,
+    )
+    final = {name: float(result[name].values[-1]) for name in result.data_vars}
+    tables = _fluid(unit.refrigerant).tables
+    recent = result.sel(time=slice(duration - 100.0, None))
+    drift = max(
+        float(np.ptp(recent[name].values) / abs(recent[name].values[-1])) for name in OUTPUT_IDS
+    )
+    return final | {
+        "superheat": final["TS"] - saturation_state(tables, final["PS"])[0],
+        "subcooling": saturation_state(tables, final["PC"])[0] - final["TC"],
+        "capacity": final["Q_evap"],
+        "COP": final["Q_evap"] / (final["W_comp"] + final["W_fans"]),
+        "energy_balance_error": (final["Q_cond"] - final["Q_evap"] - final["W_ref"])
+        / final["Q_cond"],
+        "drift": drift,
+        "status": result.attrs["status"],
+        "failure_reason": result.attrs["failure_reason"],
+    }

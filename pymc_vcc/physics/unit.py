@@ -1,0 +1,336 @@
+"""Unit descriptions: fixed geometry, refrigerant, discretisation, solver settings, parameters.
+
+A unit description is a TOML file (the built-in one ships as ``pymc_vcc/data/split_3p5kw_r410a
+.toml``). Loading validates it completely before any simulation runs: unknown keys, missing
+values, non-positive sizes, bounds with low >= high, nominals outside their bounds and unknown
+refrigerants are errors that name the field and what is allowed. All values are SI.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, fields
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from pymc_vcc.physics.parameters import ParameterSpec, ParameterTable, parameter_table
+
+BUILTIN_UNIT = "split_3p5kw_r410a.toml"
+"""File name of the built-in unit description inside ``pymc_vcc/data``."""
+
+
+@dataclass(frozen=True)
+class Discretisation:
+    """Finite volumes per heat exchanger."""
+
+    n_volumes: int
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Radau tolerances, output grid and limits of one simulation."""
+
+    rtol: float
+    atol_pressure: float  # Pa
+    atol_enthalpy: float  # J/kg
+    atol_temperature: float  # K
+    output_interval: float  # s
+    max_step: float  # s
+    max_wall_time: float  # s, a run taking longer is flagged failed
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    """Virtual PI charge controller: proportional gain (1/s); Ki = Kp^2/4 (critical damping)."""
+
+    kp: float
+    enabled: bool
+
+
+@dataclass(frozen=True)
+class CompressorGeometry:
+    """Fixed compressor data (its correction factors are calibration parameters)."""
+
+    displacement: float  # m3 per revolution
+    clearance: float  # clearance ratio of the volumetric-efficiency model, -
+    polytropic_exponent: float  # re-expansion exponent, -
+    isentropic_efficiency: float  # -
+    refrigerant_power_fraction: float  # share of shaft power reaching the refrigerant, -
+    shell_ua: float  # shell heat-loss conductance to ambient, W/K
+    max_discharge_temperature: float  # thermal limit of the discharge gas, K
+    protection_pressure_start: float  # discharge pressure where the speed droop starts, Pa
+    protection_pressure_stop: float  # discharge pressure of 5 % speed, Pa
+
+
+@dataclass(frozen=True)
+class ValveGeometry:
+    """Electronic expansion valve: flow area at full opening (m2), ṁ = A a sqrt(2 ρ Δp)."""
+
+    flow_area: float
+
+
+@dataclass(frozen=True)
+class HeatExchangerGeometry:
+    """Fixed heat-exchanger data; coil length per path is a calibration parameter."""
+
+    tube_inner_diameter: float  # m
+    n_paths: int  # parallel refrigerant circuits
+    air_side_area_per_length: float  # air-side (fin and tube) area per m of tube, m2/m
+    wall_heat_capacity_per_length: float  # tube and fin heat capacity per m of tube, J/(K m)
+    nominal_mass_flow: float  # refrigerant flow at which the nominal HTCs hold, kg/s
+
+
+@dataclass(frozen=True)
+class PipeGeometry:
+    """Connecting line; its length is a calibration parameter."""
+
+    inner_diameter: float  # m
+
+
+@dataclass(frozen=True)
+class TankGeometry:
+    """Suction accumulator."""
+
+    volume: float  # m3
+
+
+@dataclass(frozen=True)
+class FanSettings:
+    """Fan running speed (same unit as the nominal speed parameter)."""
+
+    operating_speed: float
+
+
+@dataclass(frozen=True)
+class AirProperties:
+    """Constant moist-air properties on both coils."""
+
+    density: float  # kg/m3
+    specific_heat: float  # J/(kg K)
+
+
+@dataclass(frozen=True)
+class RatingPoint:
+    """Rated operating conditions of the unit (constant inputs, SI)."""
+
+    valve_opening: float  # -
+    compressor_speed: float  # Hz
+    T_ambient: float  # K
+    T_indoor: float  # K
+
+
+@dataclass(frozen=True)
+class PressureDrop:
+    """Darcy friction factor of the lumped pressure drops (heat exchangers and lines)."""
+
+    darcy_friction_factor: float
+
+
+_SECTIONS: dict[str, type] = {
+    "discretisation": Discretisation,
+    "solver": SolverSettings,
+    "controller": ControllerSettings,
+    "compressor": CompressorGeometry,
+    "expansion_valve": ValveGeometry,
+    "condenser": HeatExchangerGeometry,
+    "evaporator": HeatExchangerGeometry,
+    "liquid_line": PipeGeometry,
+    "vapor_line": PipeGeometry,
+    "suction_tank": TankGeometry,
+    "outdoor_fan": FanSettings,
+    "indoor_fan": FanSettings,
+    "air": AirProperties,
+    "pressure_drop": PressureDrop,
+    "rating": RatingPoint,
+}
+
+_FRACTIONS = {
+    ("compressor", "clearance"),
+    ("compressor", "isentropic_efficiency"),
+    ("compressor", "refrigerant_power_fraction"),
+}
+
+
+@dataclass(frozen=True)
+class Unit:
+    """A complete, validated unit description."""
+
+    name: str
+    description: str
+    refrigerant: str
+    discretisation: Discretisation
+    solver: SolverSettings
+    controller: ControllerSettings
+    compressor: CompressorGeometry
+    expansion_valve: ValveGeometry
+    condenser: HeatExchangerGeometry
+    evaporator: HeatExchangerGeometry
+    liquid_line: PipeGeometry
+    vapor_line: PipeGeometry
+    suction_tank: TankGeometry
+    outdoor_fan: FanSettings
+    indoor_fan: FanSettings
+    air: AirProperties
+    pressure_drop: PressureDrop
+    rating: RatingPoint
+    parameters: ParameterTable
+
+    def with_changes(self, **sections: dict[str, Any]) -> Unit:
+        """A copy with some fields of some sections replaced, validated like a loaded file.
+
+        Example: ``unit.with_changes(discretisation={"n_volumes": 20})``.
+        """
+        data = unit_to_dict(self)
+        for section, values in sections.items():
+            if section not in data or not isinstance(data[section], dict):
+                raise ValueError(f"unknown section {section!r}; allowed: {sorted(_SECTIONS)}")
+            data[section].update(values)
+        return unit_from_dict(data, source=f"{self.name} (modified)")
+
+
+def _check_keys(where: str, given: dict[str, Any], allowed: list[str]) -> None:
+    unknown = sorted(set(given) - set(allowed))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; allowed keys are {allowed}")
+    missing = [key for key in allowed if key not in given]
+    if missing:
+        raise ValueError(f"{where}: missing value(s) for {missing}")
+
+
+def _section(source: str, section: str, cls: type, raw: Any) -> Any:
+    where = f"{source} [{section}]"
+    if not isinstance(raw, dict):
+        raise ValueError(f"{where}: expected a table of values, got {type(raw).__name__}")
+    names = [f.name for f in fields(cls)]
+    _check_keys(where, raw, names)
+    values: dict[str, Any] = {}
+    for f in fields(cls):
+        value = raw[f.name]
+        key = f"{where} {f.name}"
+        if f.type == "bool":
+            if not isinstance(value, bool):
+                raise ValueError(f"{key}: expected true or false, got {value!r}")
+        elif f.type == "int":
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{key}: expected a positive integer, got {value!r}")
+        else:
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ValueError(f"{key}: expected a number, got {value!r}")
+            value = float(value)
+            if not math.isfinite(value) or value <= 0.0:
+                raise ValueError(f"{key}: expected a finite positive number, got {value!r}")
+            if (section, f.name) in _FRACTIONS and value >= 1.0:
+                raise ValueError(f"{key}: expected a fraction in (0, 1), got {value!r}")
+        values[f.name] = value
+    return cls(**values)
+
+
+def _parameters(source: str, raw: Any) -> ParameterTable:
+    if not isinstance(raw, dict):
+        raise ValueError(f"{source} [parameters]: expected one table per parameter id")
+    specs = []
+    for pid, entry in raw.items():
+        where = f"{source} [parameters.{pid}]"
+        if not isinstance(entry, dict):
+            raise ValueError(f"{where}: expected a table with name, unit, bounds, nominal")
+        _check_keys(where, entry, ["name", "unit", "bounds", "nominal"])
+        bounds = entry["bounds"]
+        if (
+            not isinstance(bounds, list)
+            or len(bounds) != 2
+            or not all(isinstance(b, int | float) and not isinstance(b, bool) for b in bounds)
+        ):
+            raise ValueError(f"{where} bounds: expected [low, high] numbers, got {bounds!r}")
+        nominal = entry["nominal"]
+        if isinstance(nominal, bool) or not isinstance(nominal, int | float):
+            raise ValueError(f"{where} nominal: expected a number, got {nominal!r}")
+        try:
+            specs.append(
+                ParameterSpec(
+                    id=pid,
+                    name=str(entry["name"]),
+                    unit=str(entry["unit"]),
+                    low=float(bounds[0]),
+                    high=float(bounds[1]),
+                    nominal=float(nominal),
+                )
+            )
+        except ValueError as error:
+            raise ValueError(f"{source}: {error}") from None
+    try:
+        return parameter_table(specs)
+    except ValueError as error:
+        raise ValueError(f"{source}: {error}") from None
+
+
+def _check_refrigerant(source: str, name: Any) -> str:
+    if not isinstance(name, str):
+        raise ValueError(f"{source} [unit] refrigerant: expected a name, got {name!r}")
+    from pymc_vcc.physics.refrigerant import load_refrigerant
+
+    try:
+        load_refrigerant(name)
+    except ValueError as error:
+        raise ValueError(f"{source} [unit] refrigerant: {error}") from None
+    return name
+
+
+def unit_from_dict(data: dict[str, Any], source: str = "unit description") -> Unit:
+    """Validate a parsed unit description and build a :class:`Unit`."""
+    _check_keys(source, data, ["unit", *_SECTIONS, "parameters"])
+    head = data["unit"]
+    if not isinstance(head, dict):
+        raise ValueError(f"{source} [unit]: expected a table")
+    _check_keys(f"{source} [unit]", head, ["name", "description", "refrigerant"])
+    sections = {name: _section(source, name, cls, data[name]) for name, cls in _SECTIONS.items()}
+    return Unit(
+        name=str(head["name"]),
+        description=str(head["description"]),
+        refrigerant=_check_refrigerant(source, head["refrigerant"]),
+        parameters=_parameters(source, data["parameters"]),
+        **sections,
+    )
+
+
+def unit_to_dict(unit: Unit) -> dict[str, Any]:
+    """The TOML-shaped dictionary of a unit (inverse of :func:`unit_from_dict`)."""
+    data: dict[str, Any] = {
+        "unit": {
+            "name": unit.name,
+            "description": unit.description,
+            "refrigerant": unit.refrigerant,
+        }
+    }
+    for name in _SECTIONS:
+        section = getattr(unit, name)
+        data[name] = {f.name: getattr(section, f.name) for f in fields(section)}
+    data["parameters"] = {
+        spec.id: {
+            "name": spec.name,
+            "unit": spec.unit,
+            "bounds": [spec.low, spec.high],
+            "nominal": spec.nominal,
+        }
+        for spec in unit.parameters
+    }
+    return data
+
+
+def load_unit(path: str | Path | None = None) -> Unit:
+    """Load and validate a unit description; ``None`` loads the built-in 3.5 kW R410A split."""
+    if path is None:
+        text = resources.files("pymc_vcc").joinpath("data", BUILTIN_UNIT).read_text()
+        source = BUILTIN_UNIT
+    else:
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"unit description {path} does not exist")
+        text = path.read_text()
+        source = str(path)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"{source}: not valid TOML: {error}") from None
+    return unit_from_dict(data, source)
