@@ -31,6 +31,18 @@ chunk that gave up are rerun one at a time with nothing else in flight, and one 
 is the culprit. Dask workers started without a nanny are not restarted: once all have died, the run
 waits for new ones. The serial backend runs items in the calling process: a crash there ends the
 caller.
+
+Time limits. ``time_limit=`` (seconds per item) is enforced by stopping the work, where the
+backend can. The local-process backend terminates a worker whose chunk overruns
+``time_limit`` per item (plus a grace of :data:`TIME_LIMIT_GRACE`), starts a new one, reruns
+the chunk's items one at a time, and returns an item that overruns alone as a
+:class:`WorkerCrash` of kind ``"time-limit"``: a simulation stuck in compiled code or in a
+system call is stopped too. Dask cannot stop a running task (its worker thread runs on, and
+``Client.cancel`` only drops its result) and the serial backend cannot stop the calling
+process: there the limit is only what the task itself enforces (see
+:func:`pymc_vcc.execution.outcomes.time_limit`: an alarm signal in a main thread, an exception
+at the next Python bytecode in a Dask thread), so a call stuck in compiled code is counted as
+over time when it returns, not stopped.
 """
 
 from __future__ import annotations
@@ -55,6 +67,9 @@ from pymc_vcc.execution.worker_pool import WorkerCrash, WorkerDiedError, WorkerP
 
 ExecutorKind = Literal["serial", "processes", "dask"]
 EXECUTOR_KINDS: tuple[str, ...] = ("serial", "processes", "dask")
+TIME_LIMIT_GRACE = 1.0
+"""Seconds a local worker gets beyond its chunk's time limit before it is terminated, s (the
+task's own limit, where it has one, ends a Python-level overrun first)."""
 
 
 def available_cores() -> int:
@@ -107,15 +122,23 @@ class Executor(ABC):
     _pins_crashes: ClassVar[bool] = True
 
     def map(
-        self, fn: Callable[[Any], Any], items: Iterable[Any], *, chunksize: int | None = None
+        self,
+        fn: Callable[[Any], Any],
+        items: Iterable[Any],
+        *,
+        chunksize: int | None = None,
+        time_limit: float | None = None,
     ) -> list[Any]:
         """``[fn(item) for item in items]``, computed by the workers, in input order.
 
-        An item whose run killed its worker process gives a :class:`WorkerCrash` instead.
+        An item whose run killed its worker process, or that a local worker was stopped for
+        overrunning ``time_limit`` s, gives a :class:`WorkerCrash` instead.
         """
         items = list(items)
         results: list[Any] = [None] * len(items)
-        for index, result in self.imap_unordered(fn, items, chunksize=chunksize):
+        for index, result in self.imap_unordered(
+            fn, items, chunksize=chunksize, time_limit=time_limit
+        ):
             results[index] = result
         return results
 
@@ -126,17 +149,22 @@ class Executor(ABC):
         *,
         chunksize: int | None = None,
         batched: bool = False,
+        time_limit: float | None = None,
     ) -> Iterator[tuple[int, Any]]:
         """Yield ``(index, fn(item))`` as results finish; ``index`` is the item's position.
 
-        An item whose run killed its worker process gives ``(index, WorkerCrash(...))``.
+        An item whose run killed its worker process gives ``(index, WorkerCrash(...))``, as
+        does one that a local worker was stopped for running longer than ``time_limit`` s (see
+        the module docstring).
 
         Items are read lazily, a bounded number of chunks ahead, so closing the iterator early
         (``break`` in a ``for`` loop over ``contextlib.closing(...)``) leaves the rest unread
         and cancels what has not started. With ``batched=True``, ``fn`` takes a list of items
         and returns the list of their results (vectorised work per chunk).
         """
-        chunks = self.imap_chunks(fn, items, chunksize=chunksize, batched=batched)
+        chunks = self.imap_chunks(
+            fn, items, chunksize=chunksize, batched=batched, time_limit=time_limit
+        )
         try:
             for chunk in chunks:
                 yield from chunk
@@ -150,11 +178,14 @@ class Executor(ABC):
         *,
         chunksize: int | None = None,
         batched: bool = False,
+        time_limit: float | None = None,
     ) -> Iterator[list[tuple[int, Any]]]:
         """Like :meth:`imap_unordered`, but yield each finished chunk as one list of results.
 
         Lets a caller act once per chunk (e.g. persist a checkpoint) rather than per item.
         """
+        if time_limit is not None and not time_limit > 0:
+            raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
         handle = self._prepare(fn)
         numbered = enumerate(items)
         sizer = _ChunkSizer(chunksize, self.target_chunk_seconds)
@@ -175,7 +206,9 @@ class Executor(ABC):
                             break
                     else:
                         break
-                    pending[self._submit(handle, [value for _, value in chunk], batched)] = chunk
+                    values = [value for _, value in chunk]
+                    limit = None if time_limit is None else len(chunk) * time_limit
+                    pending[self._submit(handle, values, batched, limit)] = chunk
                 if not pending:
                     return
                 for future in self._wait_first(list(pending)):
@@ -216,8 +249,9 @@ class Executor(ABC):
         """Make ``fn`` ready to send (once per imap call)."""
 
     @abstractmethod
-    def _submit(self, handle: Any, values: list, batched: bool) -> Any:
-        """Start one chunk; return a future whose result is ``(results, seconds)``."""
+    def _submit(self, handle: Any, values: list, batched: bool, time_limit: float | None) -> Any:
+        """Start one chunk (stopped after ``time_limit`` s where the backend can); return a
+        future whose result is ``(results, seconds)``."""
 
     @abstractmethod
     def _wait_first(self, pending: list) -> Iterable[Any]:
@@ -259,7 +293,9 @@ class SerialExecutor(Executor):
     def _prepare(self, fn: Callable[..., Any]) -> Callable[..., Any]:
         return fn
 
-    def _submit(self, handle: Callable[..., Any], values: list, batched: bool) -> futures.Future:
+    def _submit(
+        self, handle: Callable[..., Any], values: list, batched: bool, time_limit: float | None
+    ) -> futures.Future:
         start = time.perf_counter()
         results = handle(values) if batched else [handle(value) for value in values]
         future: futures.Future = futures.Future()
@@ -305,9 +341,12 @@ class ProcessExecutor(_PickledFunctionExecutor):
     def _prepare(self, fn: Callable[..., Any]) -> tuple[str, bytes]:
         return self._serialise(fn)
 
-    def _submit(self, handle: tuple[str, bytes], values: list, batched: bool) -> futures.Future:
+    def _submit(
+        self, handle: tuple[str, bytes], values: list, batched: bool, time_limit: float | None
+    ) -> futures.Future:
         token, payload = handle
-        return self._pool.submit((token, payload, values, batched))
+        limit = None if time_limit is None else time_limit + TIME_LIMIT_GRACE
+        return self._pool.submit((token, payload, values, batched), limit)
 
     def _wait_first(self, pending: list) -> Iterable[Any]:
         return self._pool.wait_first(pending)
@@ -379,7 +418,9 @@ class DaskExecutor(_PickledFunctionExecutor):
             token, payload, self._client.scatter(payload, broadcast=True, hash=False)
         )
 
-    def _submit(self, handle: _ScatteredFunction, values: list, batched: bool) -> Any:
+    def _submit(
+        self, handle: _ScatteredFunction, values: list, batched: bool, time_limit: float | None
+    ) -> Any:
         if handle.data is not None and handle.data.status != "finished":
             handle.data = None
         payload = handle.payload if handle.data is None else handle.data

@@ -4,7 +4,8 @@
 run can go wrong into a :class:`SimulationOutcome` with a failure kind and a reason:
 
 ``exception``       the simulator raised (the reason names the exception)
-``time-limit``      the run took longer than its time limit
+``time-limit``      the run took longer than its time limit (or a local worker process was
+                    stopped for it: see :mod:`pymc_vcc.execution.executors`)
 ``reported``        the simulator returned a Dataset with ``attrs["status"] != "ok"``
 ``invalid-output``  outputs missing or misshapen
 ``non-finite``      NaN or infinite outputs
@@ -27,14 +28,13 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.execution.executors import WorkerCrash
+from pymc_vcc.execution.worker_pool import TIME_LIMIT, WORKER_CRASH, WorkerCrash
 from pymc_vcc.inference.series import InvalidOutputError, ObservedData, Simulator, extract_outputs
 
 OK = "ok"
-WORKER_CRASH = "worker-crash"
 FAILURE_KINDS: tuple[str, ...] = (
     "exception",
-    "time-limit",
+    TIME_LIMIT,
     "reported",
     "invalid-output",
     "non-finite",
@@ -160,7 +160,7 @@ def run_simulation(
     except SimulationTimeout:
         return SimulationOutcome(
             None,
-            "time-limit",
+            TIME_LIMIT,
             f"exceeded the time limit of {time_limit_s} s",
             time.perf_counter() - start,
         )
@@ -171,7 +171,7 @@ def run_simulation(
     elapsed = time.perf_counter() - start
     if time_limit_s is not None and elapsed > time_limit_s:
         return SimulationOutcome(
-            None, "time-limit", f"took {elapsed:.3g} s, over the limit of {time_limit_s} s", elapsed
+            None, TIME_LIMIT, f"took {elapsed:.3g} s, over the limit of {time_limit_s} s", elapsed
         )
     if isinstance(result, xr.Dataset):
         status = result.attrs.get("status", OK)
@@ -192,5 +192,6 @@ def run_simulation(
 
 
 def crash_outcome(crash: WorkerCrash) -> SimulationOutcome:
-    """The outcome of a simulation whose worker process died running it."""
-    return SimulationOutcome(None, WORKER_CRASH, _shorten(crash.reason), crash.elapsed)
+    """The outcome of a simulation whose worker process died running it, or was stopped for
+    overrunning its time limit."""
+    return SimulationOutcome(None, crash.kind, _shorten(crash.reason), crash.elapsed)

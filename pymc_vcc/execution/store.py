@@ -6,14 +6,22 @@ holds the run's settings, which a resumed run must match exactly, and one row pe
 simulation (phase, index, distance, status, reason, elapsed time). Parameter draws are not
 stored: they are recomputed from the seed, which the checkpoint keeps.
 
+Every row carries a checksum of its fields and of the run's seed (which fixes the row's
+parameters and random stream), verified when the checkpoint is read: a damaged file or an
+altered row stops the run with :class:`CheckpointDamagedError`, naming the file, rather than
+change the result.
+
 :class:`LikelihoodStore` is the same kind of file for SMC-ABC (:mod:`pymc_vcc.inference.pymc.smc`),
 whose
 simulations are not numbered in advance: each finished simulation is keyed by a digest of its
 parameter vector and random stream, and holds its log-likelihood term (never the outputs).
+:class:`ResultStore` holds a small vector of results per numbered simulation (the Sobol study's
+output averages).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import sqlite3
 from collections.abc import Iterable, Mapping
@@ -31,6 +39,7 @@ CREATE TABLE IF NOT EXISTS simulations (
     status TEXT NOT NULL,
     reason TEXT NOT NULL,
     elapsed REAL NOT NULL,
+    checksum TEXT NOT NULL,
     PRIMARY KEY (phase, idx)
 );
 """
@@ -49,6 +58,20 @@ class SimulationRecord(NamedTuple):
 
 class CheckpointMismatchError(ValueError):
     """A checkpoint written by a run with other settings than the one resuming it."""
+
+
+class CheckpointDamagedError(RuntimeError):
+    """A checkpoint file that is not a readable checkpoint, or a row that fails its checksum."""
+
+
+class ResultRecord(NamedTuple):
+    """One finished simulation of a numbered set: its results (None if failed) and status."""
+
+    index: int
+    values: tuple[float, ...] | None
+    status: str
+    reason: str
+    elapsed: float
 
 
 class LikelihoodRecord(NamedTuple):
@@ -72,21 +95,30 @@ class _CheckpointFile:
     """
 
     _schema: ClassVar[str]
+    _table: ClassVar[str]
+    _columns: ClassVar[str]  # the stored fields of a row, in order, without the checksum
 
     def __init__(
         self, path: str | Path, settings: Mapping[str, Any], entropy: int | None = None
     ) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._connection = sqlite3.connect(self.path)
-        self._connection.execute("PRAGMA journal_mode=WAL")
-        self._connection.execute("PRAGMA synchronous=NORMAL")
-        self._connection.executescript(_META + self._schema)
-        stored = dict(self._connection.execute("SELECT key, value FROM meta").fetchall())
+        try:
+            self._connection = sqlite3.connect(self.path)
+            self._connection.execute("PRAGMA journal_mode=WAL")
+            self._connection.execute("PRAGMA synchronous=NORMAL")
+            self._connection.executescript(_META + self._schema)
+            stored = dict(self._connection.execute("SELECT key, value FROM meta").fetchall())
+        except sqlite3.DatabaseError as error:
+            raise self._damaged(str(error)) from None
         wanted = json.loads(json.dumps(dict(settings)))
         if stored:
-            saved_settings = json.loads(stored["settings"])
-            saved_entropy = int(stored["entropy"])
+            try:
+                saved_settings = json.loads(stored["settings"])
+                saved_entropy = int(stored["entropy"])
+            except (KeyError, ValueError) as error:
+                self.close()
+                raise self._damaged(f"its run settings are unreadable: {error}") from None
             if saved_settings != wanted or (entropy is not None and entropy != saved_entropy):
                 self.close()
                 differing = self._differences(saved_settings, wanted, saved_entropy, entropy)
@@ -115,6 +147,41 @@ class _CheckpointFile:
             keys.append("seed")
         return keys
 
+    def _damaged(self, detail: str) -> CheckpointDamagedError:
+        return CheckpointDamagedError(
+            f"checkpoint {self.path} is damaged ({detail}) and cannot be resumed; delete it to "
+            "start afresh (pymc-vcc: run without --resume, or with a new --out)"
+        )
+
+    def _checksum(self, fields: tuple) -> str:
+        """Digest of a row's stored fields and of the run's seed entropy."""
+        text = json.dumps([str(self.entropy), *fields])
+        return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
+
+    def _insert(self, rows: list[tuple]) -> None:
+        """Persist rows of stored fields, each with its checksum, in one transaction."""
+        marks = ", ".join("?" * (len(self._columns.split(",")) + 1))
+        with self._connection:
+            self._connection.executemany(
+                f"INSERT OR REPLACE INTO {self._table} VALUES ({marks})",
+                [(*row, self._checksum(row)) for row in rows],
+            )
+
+    def _verified_rows(self) -> list[tuple]:
+        """Every stored row (without its checksum), each checked against its checksum."""
+        try:
+            rows = self._connection.execute(
+                f"SELECT {self._columns}, checksum FROM {self._table}"
+            ).fetchall()
+        except sqlite3.DatabaseError as error:
+            raise self._damaged(str(error)) from None
+        for *fields, checksum in rows:
+            if self._checksum(tuple(fields)) != checksum:
+                raise self._damaged(
+                    f"the row of simulation {fields[:-4]} fails its checksum: altered or corrupted"
+                )
+        return [tuple(fields) for *fields, _ in rows]
+
     def close(self) -> None:
         """Close the file."""
         self._connection.close()
@@ -131,12 +198,12 @@ class SimulationStore(_CheckpointFile):
     draw index."""
 
     _schema = _SCHEMA
+    _table = "simulations"
+    _columns = "phase, idx, distance, status, reason, elapsed"
 
     def load(self) -> list[SimulationRecord]:
         """Every finished simulation stored so far."""
-        rows = self._connection.execute(
-            "SELECT phase, idx, distance, status, reason, elapsed FROM simulations"
-        ).fetchall()
+        rows = self._verified_rows()
         return [
             SimulationRecord(phase, index, np.nan if distance is None else distance, *rest)
             for phase, index, distance, *rest in rows
@@ -155,10 +222,7 @@ class SimulationStore(_CheckpointFile):
             )
             for r in records
         ]
-        with self._connection:
-            self._connection.executemany(
-                "INSERT OR REPLACE INTO simulations VALUES (?, ?, ?, ?, ?, ?)", rows
-            )
+        self._insert(rows)
 
 
 class LikelihoodStore(_CheckpointFile):
@@ -170,15 +234,16 @@ CREATE TABLE IF NOT EXISTS likelihoods (
     loglik REAL,
     status TEXT NOT NULL,
     reason TEXT NOT NULL,
-    elapsed REAL NOT NULL
+    elapsed REAL NOT NULL,
+    checksum TEXT NOT NULL
 );
 """
+    _table = "likelihoods"
+    _columns = "key, loglik, status, reason, elapsed"
 
     def load(self) -> dict[str, LikelihoodRecord]:
         """Every finished simulation stored so far, by key."""
-        rows = self._connection.execute(
-            "SELECT key, loglik, status, reason, elapsed FROM likelihoods"
-        ).fetchall()
+        rows = self._verified_rows()
         return {
             key: LikelihoodRecord(key, np.nan if loglik is None else loglik, *rest)
             for key, loglik, *rest in rows
@@ -196,7 +261,43 @@ CREATE TABLE IF NOT EXISTS likelihoods (
             )
             for r in records
         ]
-        with self._connection:
-            self._connection.executemany(
-                "INSERT OR REPLACE INTO likelihoods VALUES (?, ?, ?, ?, ?)", rows
-            )
+        self._insert(rows)
+
+
+class ResultStore(_CheckpointFile):
+    """The checkpoint of a set of numbered simulations that each give a few numbers."""
+
+    _schema = """
+CREATE TABLE IF NOT EXISTS results (
+    idx INTEGER PRIMARY KEY,
+    vals TEXT,
+    status TEXT NOT NULL,
+    reason TEXT NOT NULL,
+    elapsed REAL NOT NULL,
+    checksum TEXT NOT NULL
+);
+"""
+    _table = "results"
+    _columns = "idx, vals, status, reason, elapsed"
+
+    def load(self) -> dict[int, ResultRecord]:
+        """Every finished simulation stored so far, by index."""
+        return {
+            index: ResultRecord(index, None if values is None else tuple(json.loads(values)), *rest)
+            for index, values, *rest in self._verified_rows()
+        }
+
+    def append(self, records: Iterable[ResultRecord]) -> None:
+        """Persist finished simulations in one transaction."""
+        self._insert(
+            [
+                (
+                    int(r.index),
+                    None if r.values is None else json.dumps([float(v) for v in r.values]),
+                    r.status,
+                    r.reason,
+                    float(r.elapsed),
+                )
+                for r in records
+            ]
+        )

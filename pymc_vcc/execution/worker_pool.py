@@ -3,11 +3,16 @@
 Each worker has its own pipe, so a worker that dies (a segfault in compiled code, ``os._exit``,
 the out-of-memory killer) is pinned on the chunk it was running: that chunk's future fails with
 :class:`WorkerDiedError` carrying a :class:`WorkerCrash`, a new worker takes its place and the
-others go on. :func:`run_chunk` is what every backend's workers run (Dask's too).
+others go on. A chunk given a time limit that its worker overruns is stopped the same way: the
+worker is terminated (whatever it is doing, compiled code included) and replaced, and the
+chunk fails with a crash of kind ``"time-limit"``. A chunk's clock starts when its worker has
+loaded the function (so unpickling and compiling it never count). :func:`run_chunk` is what
+every backend's workers run (Dask's too).
 """
 
 from __future__ import annotations
 
+import math
 import signal
 import time
 import traceback
@@ -30,19 +35,27 @@ _FUNCTION_CACHE: dict[str, Callable[..., Any]] = {}
 _FUNCTION_CACHE_SIZE = 4
 _STOP_SECONDS = 5.0
 _AHEAD_BYTES = 4096  # a chunk message this small may wait in a busy worker's pipe (never blocks)
+_LOADED = "loaded"  # a worker's note that it has the chunk's function and starts its items
+
+
+WORKER_CRASH = "worker-crash"
+TIME_LIMIT = "time-limit"
 
 
 @dataclass(frozen=True, slots=True)
 class WorkerCrash:
-    """Stands in for the result of an item whose run killed the worker process running it.
+    """Stands in for the result of an item whose run killed, or overran, its worker process.
 
     Attributes:
         reason: what happened, e.g. ``"worker process died (exit code -11 / signal SIGSEGV)"``.
         elapsed: wall time from the start of the item's lone run to the death, s (0 if unknown).
+        kind: ``"worker-crash"`` (the process died) or ``"time-limit"`` (it was stopped for
+            overrunning its time limit).
     """
 
     reason: str
     elapsed: float = 0.0
+    kind: str = WORKER_CRASH
 
 
 class WorkerDiedError(Exception):
@@ -74,9 +87,20 @@ def _load_function(token: str, payload: bytes) -> Callable[..., Any]:
     return function
 
 
-def run_chunk(token: str, payload: bytes, values: list, batched: bool) -> tuple[list, float]:
-    """Worker side: apply the function to one chunk; returns (results, seconds spent)."""
+def run_chunk(
+    token: str,
+    payload: bytes,
+    values: list,
+    batched: bool,
+    loaded: Callable[[], None] | None = None,
+) -> tuple[list, float]:
+    """Worker side: apply the function to one chunk; returns (results, seconds spent).
+
+    ``loaded`` is called once the function is ready, before the first item runs.
+    """
     function = _load_function(token, payload)
+    if loaded is not None:
+        loaded()
     start = time.perf_counter()
     results = function(values) if batched else [function(value) for value in values]
     return list(results), time.perf_counter() - start
@@ -85,10 +109,15 @@ def run_chunk(token: str, payload: bytes, values: list, batched: bool) -> tuple[
 def _worker_main(connection: Connection) -> None:
     """A local worker process: run the chunks received on ``connection`` until told to stop.
 
-    Replies ``(True, (results, seconds))`` or ``(False, exception, traceback text)``. Ctrl-C is
-    left to the parent, which stops the workers; a ``SystemExit`` ends the worker like a crash.
+    Sends ``"loaded"`` once a chunk's function is ready, then replies ``(True, (results,
+    seconds))`` or ``(False, exception, traceback text)``. Ctrl-C is left to the parent, which
+    stops the workers; a ``SystemExit`` ends the worker like a crash.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def loaded() -> None:
+        connection.send(_LOADED)
+
     while True:
         try:
             job = connection.recv()
@@ -97,7 +126,7 @@ def _worker_main(connection: Connection) -> None:
         if job is None:
             return
         try:
-            reply: tuple = (True, run_chunk(*job))
+            reply: tuple = (True, run_chunk(*job, loaded=loaded))
         except Exception as error:
             reply = (False, error, traceback.format_exc())
         try:
@@ -124,6 +153,14 @@ class _Job:
     message: tuple
     data: bytes | None = None  # the pickled message, once taken from the queue
     started: float = 0.0
+    time_limit: float | None = None  # s from the worker's "loaded" note; None: no limit
+    loaded: bool = False
+
+    def overdue(self, now: float) -> float:
+        """Seconds past its time limit (negative: time left; -inf: no limit or not started)."""
+        if self.time_limit is None or not self.loaded:
+            return -math.inf
+        return now - self.started - self.time_limit
 
 
 @dataclass
@@ -180,8 +217,11 @@ class WorkerPool:
         child_end.close()
         return _Worker(process, parent_end)
 
-    def _replace(self, worker: _Worker) -> None:
-        """Start a new process in place of ``worker``'s dead one; fail the chunk it was running."""
+    def _replace(self, worker: _Worker, stopped: WorkerCrash | None = None) -> None:
+        """Start a new process in place of ``worker``'s dead one; fail the chunk it was running.
+
+        ``stopped`` is the crash to report when this pool ended the worker itself.
+        """
         while worker.jobs and worker.connection.poll():  # replies sent before it died count
             if not self._receive_reply(worker):
                 break
@@ -197,12 +237,17 @@ class WorkerPool:
         if jobs:
             running = jobs.popleft()
             elapsed = time.perf_counter() - running.started
-            running.future.set_exception(WorkerDiedError(WorkerCrash(reason, elapsed)))
+            crash = WorkerCrash(reason, elapsed) if stopped is None else stopped
+            running.future.set_exception(WorkerDiedError(crash))
             self._queue.extendleft(reversed(jobs))  # never started: queued again, first
 
-    def submit(self, message: tuple) -> futures.Future:
-        """Queue a chunk ``(token, payload, values, batched)``; its future gets the reply."""
-        job = _Job(futures.Future(), message)
+    def submit(self, message: tuple, time_limit: float | None = None) -> futures.Future:
+        """Queue a chunk ``(token, payload, values, batched)``; its future gets the reply.
+
+        A chunk still running ``time_limit`` s after its worker loaded the function is stopped
+        (the worker terminated and replaced) and fails with a ``"time-limit"`` crash.
+        """
+        job = _Job(futures.Future(), message, time_limit=time_limit)
         self._queue.append(job)
         self._dispatch()
         return job.future
@@ -253,6 +298,10 @@ class WorkerPool:
             return False
         except Exception as error:  # a reply this process cannot unpickle
             reply = (False, error, traceback.format_exc())
+        if reply == _LOADED:
+            worker.jobs[0].started = time.perf_counter()
+            worker.jobs[0].loaded = True
+            return True
         job = worker.jobs.popleft()
         if worker.jobs:
             worker.jobs[0].started = time.perf_counter()
@@ -276,7 +325,11 @@ class WorkerPool:
                 raise RuntimeError("waiting for chunks that were never submitted to this pool")
             handles = [worker.connection for worker in busy]
             handles += [worker.process.sentinel for worker in busy]
-            ready = set(mp_connection.wait(handles))
+            now = time.perf_counter()
+            most_overdue = max(worker.jobs[0].overdue(now) for worker in busy)
+            timeout = None if most_overdue == -math.inf else max(-most_overdue, 0.0)
+            ready = set(mp_connection.wait(handles, timeout))
+            self._stop_overdue(busy)
             for worker in busy:
                 if worker.connection in ready:
                     if not self._receive_reply(worker):
@@ -284,6 +337,18 @@ class WorkerPool:
                 elif worker.process.sentinel in ready:
                     self._replace(worker)
             self._dispatch()  # feed freed workers before the caller handles the results
+
+    def _stop_overdue(self, busy: list[_Worker]) -> None:
+        """Terminate and replace each worker whose running chunk overran its time limit."""
+        now = time.perf_counter()
+        for worker in busy:
+            job = worker.jobs[0]
+            if job.overdue(now) < 0 or worker.connection.poll():  # done just in time: keep it
+                continue
+            worker.process.kill()
+            elapsed = now - job.started
+            reason = f"stopped after {elapsed:.3g} s, over its time limit of {job.time_limit:.3g} s"
+            self._replace(worker, WorkerCrash(reason, elapsed, TIME_LIMIT))
 
     def close(self) -> None:
         """Stop every worker (busy ones at once) and cancel queued chunks."""

@@ -25,7 +25,7 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
-from pymc_vcc.execution.outcomes import WORKER_CRASH, run_simulation
+from pymc_vcc.execution.outcomes import run_simulation
 from pymc_vcc.inference.noise import add_output_noise, noise_parameter
 from pymc_vcc.inference.series import ObservedData, OutputData, Simulator, prepare_observed
 
@@ -185,10 +185,12 @@ def sample_posterior_predictive(
     ]
     with executor_scope(executor, n_workers) as pool:
         results = [
-            (None, WORKER_CRASH, result.reason, None, None)
+            (None, result.kind, result.reason, None, None)
             if isinstance(result, WorkerCrash)
             else result
-            for result in pool.map(PredictiveRun(simulator, layout, time_limit_s), items)
+            for result in pool.map(
+                PredictiveRun(simulator, layout, time_limit_s), items, time_limit=time_limit_s
+            )
         ]
 
     finished = [r for r in results if r[0] is not None]

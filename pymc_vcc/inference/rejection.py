@@ -289,7 +289,7 @@ def _run_phase(
     bar.start_phase(f"{PHASE_NAMES[phase]:5s}", size, records.n_done)
     todo = np.flatnonzero(~records.done)
     items = ((phase, int(index), thetas[index]) for index in todo)
-    chunks = executor.imap_chunks(task, items, batched=True)
+    chunks = executor.imap_chunks(task, items, batched=True, time_limit=task.time_limit)
     try:
         for chunk in chunks:
             finished = [

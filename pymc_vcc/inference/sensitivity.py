@@ -8,12 +8,16 @@ Failed simulations are handled without biasing the estimators' structure: Saltel
 in blocks of ``D + 2`` per base sample (A, the D mixed rows AB_j, B), and the estimators combine
 rows of one block only. A block with any failed row is dropped whole, so the indices are those of
 the surviving base samples (the parameter region where the model runs), and the drop is counted.
+
+With a ``checkpoint`` file every finished simulation is persisted as its chunk completes, and a
+run started again with the same arguments resumes there, recomputing none of them.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import xarray as xr
@@ -21,7 +25,8 @@ from SALib.analyze import sobol as sobol_analyze
 from SALib.sample import sobol as sobol_sample
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
-from pymc_vcc.execution.outcomes import WORKER_CRASH, run_simulation
+from pymc_vcc.execution.outcomes import crash_outcome, run_simulation
+from pymc_vcc.execution.store import ResultRecord, ResultStore
 from pymc_vcc.inference.priors import validate_bounds
 from pymc_vcc.inference.series import OutputData, Simulator, prepare_observed
 
@@ -52,22 +57,51 @@ class WindowMean:
 
 @dataclass(frozen=True)
 class _SobolTask:
-    """Worker side: simulate one Saltelli row; returns (means or None, status, reason)."""
+    """Worker side: simulate one Saltelli row; returns its record (means None if failed)."""
 
     reduced: WindowMean
     names: tuple[str, ...]
     seed: int
+    time_limit: float | None
 
-    def __call__(self, item: tuple[int, np.ndarray]) -> tuple[np.ndarray | None, str, str]:
+    def __call__(self, item: tuple[int, np.ndarray]) -> ResultRecord:
         index, row = item
         template = prepare_observed(
             np.zeros((len(self.reduced.outputs), 1)), output_names=self.reduced.outputs
         )
         rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(index,)))
         theta = dict(zip(self.names, map(float, row), strict=True))
-        outcome = run_simulation(self.reduced, theta, rng, template)
-        means = None if outcome.values is None else outcome.values[:, 0]
-        return means, outcome.status, outcome.reason
+        outcome = run_simulation(self.reduced, theta, rng, template, time_limit_s=self.time_limit)
+        means = None if outcome.values is None else tuple(map(float, outcome.values[:, 0]))
+        return ResultRecord(index, means, outcome.status, outcome.reason, outcome.elapsed)
+
+
+def _crash_record(index: int, crash: WorkerCrash) -> ResultRecord:
+    outcome = crash_outcome(crash)
+    return ResultRecord(index, None, outcome.status, outcome.reason, outcome.elapsed)
+
+
+def _run_rows(
+    runner: Executor, task: _SobolTask, rows: np.ndarray, store: ResultStore | None
+) -> list[ResultRecord]:
+    """Every row's record: from the checkpoint, else simulated (and persisted chunk by chunk)."""
+    records = store.load() if store is not None else {}
+    todo = [index for index in range(len(rows)) if index not in records]
+    chunks = runner.imap_chunks(
+        task, ((index, rows[index]) for index in todo), time_limit=task.time_limit
+    )
+    try:
+        for chunk in chunks:
+            finished = [
+                _crash_record(todo[position], result) if isinstance(result, WorkerCrash) else result
+                for position, result in chunk
+            ]
+            if store is not None:
+                store.append(finished)
+            records.update((record.index, record) for record in finished)
+    finally:
+        chunks.close()
+    return [records[index] for index in range(len(rows))]
 
 
 def sobol_indices(
@@ -80,6 +114,8 @@ def sobol_indices(
     executor: Executor | ExecutorKind = "processes",
     seed: int = 0,
     n_resamples: int = 100,
+    checkpoint: str | Path | None = None,
+    time_limit: float | None = None,
 ) -> xr.Dataset:
     """First- and total-order Sobol indices of each output's time average.
 
@@ -93,6 +129,9 @@ def sobol_indices(
         executor: where simulations run (an executor, or a kind to create one).
         seed: seeds the scrambled Sobol sequence and the simulations' random streams.
         n_resamples: bootstrap resamples of SALib's confidence intervals.
+        checkpoint: SQLite file persisting finished simulations; a run started again with the
+            same arguments resumes there and recomputes nothing finished.
+        time_limit: wall-time limit of one simulation, s; slower runs count as failed.
 
     Returns:
         Dataset with ``S1``, ``ST`` and their 95 % half-widths ``S1_conf``, ``ST_conf`` over
@@ -107,21 +146,34 @@ def sobol_indices(
         raise ValueError(f"n_base must be at least 2, got {n_base}")
     if window is not None and not window[0] < window[1]:
         raise ValueError(f"window must be (start, end) with start < end, got {window}")
+    if time_limit is not None and not time_limit > 0:
+        raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
     problem = {
         "num_vars": len(names),
         "names": list(names),
         "bounds": [list(checked[name]) for name in names],
     }
     rows = sobol_sample.sample(problem, n_base, calc_second_order=False, seed=seed)
-    task = _SobolTask(WindowMean(simulator, outputs, window), names, seed)
-    with executor_scope(executor) as runner:
-        results = [
-            (None, WORKER_CRASH, result.reason) if isinstance(result, WorkerCrash) else result
-            for result in runner.map(task, list(enumerate(rows)))
-        ]
+    task = _SobolTask(WindowMean(simulator, outputs, window), names, seed, time_limit)
+    settings = {
+        "sampler": "sobol_indices",
+        "problem": problem,
+        "outputs": list(outputs),
+        "n_base": int(n_base),
+        "window": None if window is None else list(map(float, window)),
+        "simulator": f"{type(simulator).__module__}.{type(simulator).__qualname__}",
+        "time_limit": time_limit,
+    }
+    store = ResultStore(checkpoint, settings, seed) if checkpoint is not None else None
+    try:
+        with executor_scope(executor) as runner:
+            results = _run_rows(runner, task, rows, store)
+    finally:
+        if store is not None:
+            store.close()
 
     block = len(names) + 2
-    failed = np.array([means is None for means, _, _ in results]).reshape(n_base, block)
+    failed = np.array([record.values is None for record in results]).reshape(n_base, block)
     kept_blocks = ~failed.any(axis=1)
     if kept_blocks.sum() < 2:
         raise RuntimeError(
@@ -130,7 +182,7 @@ def sobol_indices(
         )
     kept_rows = np.repeat(kept_blocks, block)
     values = np.array(
-        [means for (means, _, _), keep in zip(results, kept_rows, strict=True) if keep]
+        [record.values for record, keep in zip(results, kept_rows, strict=True) if keep]
     )
 
     indices = {key: np.empty((len(names), len(outputs))) for key in ("S1", "ST")}
@@ -149,9 +201,10 @@ def sobol_indices(
             conf[key][:, j] = analysis[key]
 
     reasons: dict[str, int] = {}
-    for _, status, reason in results:
-        if status != "ok":
-            reasons[f"{status}: {reason}"] = reasons.get(f"{status}: {reason}", 0) + 1
+    for record in results:
+        if record.status != "ok":
+            text = f"{record.status}: {record.reason}"
+            reasons[text] = reasons.get(text, 0) + 1
     dims = ("parameter", "output")
     return xr.Dataset(
         {key: (dims, value) for key, value in {**indices, **conf}.items()},

@@ -1,19 +1,28 @@
-"""What every study shares: work budgets, settings (executor, seed, output folder) and files."""
+"""What every study shares: work budgets, settings (executor, seed, output folder) and files.
+
+A study with an output folder holds it for its whole run (:meth:`StudySettings.claim_output`:
+one run per folder, checked writable before any simulation) and writes each result file
+atomically, so an interrupted run leaves complete files or none.
+"""
 
 from __future__ import annotations
 
+import functools
 import json
 import shutil
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.executors import EXECUTOR_KINDS, Executor, make_executor
+from pymc_vcc.execution.output_folder import OutputFolderError, atomic_path, claim_output_folder
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -72,6 +81,8 @@ class StudySettings:
         resume: continue from the checkpoints in ``out`` instead of starting afresh.
         seed: seeds the datasets' draws and every sampler.
         progress: show progress bars (default: when standard error is a terminal).
+        time_limit: wall-time limit of one simulation, s (None: the simulator's own limit
+            only); a local worker process that overruns it is stopped and replaced.
     """
 
     budget: str | Budget = "small"
@@ -82,9 +93,18 @@ class StudySettings:
     resume: bool = False
     seed: int = 0
     progress: bool | None = None
+    time_limit: float | None = None
 
     def __post_init__(self) -> None:
         get_budget(self.budget)
+        if self.n_workers is not None and not (
+            isinstance(self.n_workers, int) and self.n_workers >= 1
+        ):
+            raise ValueError(f"n_workers must be a positive integer, got {self.n_workers!r}")
+        if self.time_limit is not None and not self.time_limit > 0:
+            raise ValueError(
+                f"time_limit must be a positive number of seconds, got {self.time_limit!r}"
+            )
         if self.executor not in EXECUTOR_KINDS:
             raise ValueError(
                 f"executor must be one of {list(EXECUTOR_KINDS)}, got {self.executor!r}"
@@ -108,7 +128,30 @@ class StudySettings:
             "n_main": work.n_main,
             "n_desired": work.n_desired,
             "progress": self.progress,
+            "time_limit": self.time_limit,
         }
+
+    @contextmanager
+    def claim_output(self, study: str) -> Iterator[None]:
+        """Hold ``out`` for this run (see :mod:`pymc_vcc.execution.output_folder`).
+
+        With ``resume``, ``out`` must hold checkpoints of ``study`` (``checkpoints/<study>*``).
+
+        Raises:
+            OutputFolderError: ``out`` is not writable, another run holds it, or there is
+                nothing to resume.
+        """
+        if self.out is None:
+            yield
+            return
+        with claim_output_folder(self.out):
+            folder = self.out / "checkpoints"
+            if self.resume and not any(folder.glob(f"{study}*")):
+                raise OutputFolderError(
+                    f"nothing to resume: {folder} holds no checkpoint of the {study} study; "
+                    "run without --resume to start afresh"
+                )
+            yield
 
     @contextmanager
     def open_executor(self) -> Iterator[Executor]:
@@ -141,13 +184,38 @@ class StudySettings:
         return np.random.SeedSequence(self.seed).spawn(n)
 
 
-def write_json(path: Path, payload: dict[str, Any]) -> None:
-    """Write ``payload`` as indented JSON."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(payload, indent=2) + "\n")
+def holds_output_folder(study: str) -> Callable[[Callable[..., T]], Callable[..., T]]:
+    """Decorate a study ``f(settings=None, ...)``: it runs holding its settings' output folder.
+
+    The study gets its settings (default :class:`StudySettings`) as first argument and runs
+    inside :meth:`StudySettings.claim_output`, so that the folder is locked and checked
+    writable before any simulation.
+    """
+
+    def decorate(study_function: Callable[..., T]) -> Callable[..., T]:
+        @functools.wraps(study_function)
+        def run(settings: StudySettings | None = None, *args: Any, **kwargs: Any) -> T:
+            settings = settings or StudySettings()
+            with settings.claim_output(study):
+                return study_function(settings, *args, **kwargs)
+
+        return run
+
+    return decorate
 
 
-def write_tree(tree: xr.DataTree, path: Path) -> None:
-    """Save a DataTree as netCDF (reloads with ``xarray.open_datatree`` / ArviZ)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tree.to_netcdf(path, engine="h5netcdf")
+def write_text(path: Path, text: str) -> None:
+    """Write ``text`` atomically."""
+    with atomic_path(path) as partial:
+        partial.write_text(text)
+
+
+def write_json(path: Path, payload: Mapping[str, Any]) -> None:
+    """Write ``payload`` as indented JSON, atomically."""
+    write_text(path, json.dumps(payload, indent=2) + "\n")
+
+
+def write_netcdf(data: xr.DataTree | xr.Dataset, path: Path) -> None:
+    """Save a DataTree or Dataset as netCDF, atomically (reloads with ``xarray`` / ArviZ)."""
+    with atomic_path(path) as partial:
+        data.to_netcdf(partial, engine="h5netcdf")

@@ -24,7 +24,7 @@ from pymc_vcc.physics.cycle import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_inputs, plot_predictive, plot_prior_posterior, save_figure
-from pymc_vcc.studies.common import StudySettings, write_json, write_tree
+from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_netcdf
 
 SENSITIVE = ("M0", "CF_VOL", "CF_POW", "CF_PREF", "CF_LEV")
 """Parameters the paper found well identified (Fig. 5), shown first in the KDE figures."""
@@ -97,6 +97,7 @@ def _sd_ratio(tree: xr.DataTree) -> dict[str, float]:
     }
 
 
+@holds_output_folder("estimate")
 def estimation_study(
     settings: StudySettings | None = None,
     *,
@@ -117,7 +118,6 @@ def estimation_study(
         max_attempts: reference draws tried until both datasets simulate successfully.
     """
     started = time.perf_counter()
-    settings = settings or StudySettings()
     unit = unit or load_unit()
     full = VCCSimulator(unit, inputs)
     draw_seed, sampler_seed, predictive_seed = settings.seeds(3)
@@ -152,6 +152,7 @@ def estimation_study(
                 max_draws=settings.work.predictive_draws,
                 executor=executor,
                 seed=seed,
+                time_limit_s=settings.time_limit,
             )
             for tree, reference, seed in zip(
                 calibration.trees, references, predictive_seed.spawn(2), strict=True
@@ -182,13 +183,13 @@ def _write(
     out = settings.out / "estimate"
     out.mkdir(parents=True, exist_ok=True)
     files = [out / "calibration.nc", out / "summary.json"]
-    result.calibration.to_netcdf(files[0])
+    write_netcdf(result.calibration.to_datatree(), files[0])
     write_json(files[1], result.summary())
     files += save_figure(plot_inputs(inputs, calibration_end=t_calibration), out / "fig4_inputs")
     long_names = {spec.id: spec.name for spec in unit.parameters}
     for k, (tree, truth) in enumerate(zip(result.predictive, result.truths, strict=True)):
         path = out / f"predictive_{k + 1}.nc"
-        write_tree(tree, path)
+        write_netcdf(tree, path)
         files.append(path)
         ordered = [*SENSITIVE, *(name for name in truth if name not in SENSITIVE)]
         kde = plot_prior_posterior(tree, ordered, truth=truth, long_names=long_names)

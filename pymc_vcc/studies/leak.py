@@ -24,7 +24,13 @@ from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_charge_posteriors, save_figure
-from pymc_vcc.studies.common import StudySettings, write_json, write_tree
+from pymc_vcc.studies.common import (
+    StudySettings,
+    holds_output_folder,
+    write_json,
+    write_netcdf,
+    write_text,
+)
 
 Sampler = Literal["rejection", "smc"]
 SAMPLERS: tuple[str, ...] = ("rejection", "smc")
@@ -117,7 +123,14 @@ def _calibrate(
         )
         return tree, int(tree["sample_stats"]["n_simulations"])
     with pm.Model():
-        add_simulator("outputs", simulator, observed, prior=prior, epsilon=epsilon)
+        add_simulator(
+            "outputs",
+            simulator,
+            observed,
+            prior=prior,
+            epsilon=epsilon,
+            time_limit_s=settings.time_limit,
+        )
         tree = sample_smc_abc(
             settings.work.smc_draws,
             executor=executor,
@@ -129,6 +142,7 @@ def _calibrate(
     return tree, int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
 
 
+@holds_output_folder("leak")
 def leak_study(
     settings: StudySettings | None = None,
     *,
@@ -153,7 +167,6 @@ def leak_study(
         smc_epsilon: width of SMC-ABC's Gaussian kernel on the KS distance.
     """
     started = time.perf_counter()
-    settings = settings or StudySettings()
     if sampler not in SAMPLERS:
         raise ValueError(f"sampler must be one of {list(SAMPLERS)}, got {sampler!r}")
     if not 0 < alarm_fraction <= 1:
@@ -209,18 +222,19 @@ def _write(result: LeakResult, settings: StudySettings) -> list[str]:
     files = []
     for stage, tree in enumerate(result.trees):
         path = out / f"posterior_{stage}.nc"
-        write_tree(tree, path)
+        write_netcdf(tree, path)
         files.append(path)
     table = out / "table_ii.csv"
     header = "reference_kg,mean_kg,sd_kg,p_leak\n"
-    table.write_text(
+    write_text(
+        table,
         header
         + "".join(
             f"{r['reference_kg']},{r['mean_kg']:.5f},{r['sd_kg']:.5f},{r['p_leak']:.4f}\n"
             for r in result.table
-        )
+        ),
     )
-    (out / "table_ii.txt").write_text(result.format_table() + "\n")
+    write_text(out / "table_ii.txt", result.format_table() + "\n")
     write_json(out / "summary.json", result.summary())
     figure = plot_charge_posteriors(result.trees, [r["reference_kg"] for r in result.table])
     files += [table, out / "table_ii.txt", out / "summary.json"]

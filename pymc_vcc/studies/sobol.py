@@ -17,7 +17,7 @@ from pymc_vcc.physics.cycle import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_sobol_heatmap, save_figure
-from pymc_vcc.studies.common import StudySettings, write_json
+from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_netcdf
 
 
 @dataclass
@@ -53,6 +53,7 @@ class SobolResult:
         }
 
 
+@holds_output_folder("sobol")
 def sobol_study(
     settings: StudySettings | None = None,
     *,
@@ -62,7 +63,6 @@ def sobol_study(
 ) -> SobolResult:
     """First- and total-order Sobol indices of the nine outputs' averages over ``window`` (s)."""
     started = time.perf_counter()
-    settings = settings or StudySettings()
     unit = unit or load_unit()
     simulator = VCCSimulator(unit, inputs, t_window=(0.0, window[1]))
     bounds = {spec.id: (spec.low, spec.high) for spec in unit.parameters}
@@ -75,12 +75,13 @@ def sobol_study(
             window=window,
             executor=executor,
             seed=settings.seed,
+            checkpoint=settings.checkpoint("sobol"),
+            time_limit=settings.time_limit,
         )
     result = SobolResult(indices, time.perf_counter() - started)
     if settings.out is not None:
         out = settings.out / "sobol"
-        out.mkdir(parents=True, exist_ok=True)
-        indices.to_netcdf(out / "sobol_indices.nc", engine="h5netcdf")
+        write_netcdf(indices, out / "sobol_indices.nc")
         write_json(out / "summary.json", result.summary())
         files = [out / "sobol_indices.nc", out / "summary.json"]
         for order, stem in (("S1", "first_order"), ("ST", "total_order")):

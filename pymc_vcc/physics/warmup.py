@@ -1,0 +1,77 @@
+"""Compile the cycle model once per process, before any simulation's wall clock starts.
+
+The cycle's Numba kernels compile on their first call (``cache=True`` keeps the machine code on
+disk, so later processes only load it) and the refrigerant tables are built from CoolProp on the
+first use of a fluid. Neither is part of a simulation: :func:`ensure_compiled` does both ahead
+of time, so that a wall-clock or sampler time limit never counts them and a run's result never
+depends on whether the caches were warm. A first compile that takes long is announced on
+standard error (in the main process only: worker processes load the code it cached).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import sys
+import threading
+
+import numpy as np
+
+from pymc_vcc.physics.cycle import (
+    N_EVAL,
+    build_constants,
+    evaluate,
+    initial_state,
+    jacobian,
+    n_states,
+    outputs_along,
+)
+from pymc_vcc.physics.inputs import INPUT_IDS
+from pymc_vcc.physics.unit import Unit
+
+ANNOUNCE_AFTER_SECONDS = 2.0
+"""A warm-up still running after this long is a first compile: say so on screen, s."""
+
+TYPICAL_COMPILE_SECONDS = 60
+"""A cold compile of the cycle model, measured on a busy 2-core machine, s (rounded up)."""
+
+_READY: set[tuple[str, int]] = set()  # (refrigerant, cells per heat exchanger) warmed up here
+
+
+def _announce() -> None:
+    print(
+        f"compiling the cycle model, once: ~{TYPICAL_COMPILE_SECONDS} s "
+        "(Numba; later runs load it from its cache)",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def _run_kernels(unit: Unit) -> None:
+    """Call every kernel the driver calls, at the unit's rating point and nominal parameters."""
+    from pymc_vcc.physics.refrigerant import load_refrigerant
+
+    tables = load_refrigerant(unit.refrigerant).tables
+    n = unit.discretisation.n_volumes
+    u = np.array([getattr(unit.rating, name) for name in INPUT_IDS])
+    c = build_constants(unit, unit.parameters.nominal)
+    y = initial_state(c, n, unit.rating.T_ambient, unit.rating.T_indoor, tables)
+    dydt = np.empty(n_states(n))
+    evaluate(y, u, c, tables, dydt, np.empty(N_EVAL))
+    jacobian(y, u, c, tables, dydt.copy())
+    outputs_along(y[np.newaxis, :], u[np.newaxis, :], c, tables)
+
+
+def ensure_compiled(unit: Unit) -> None:
+    """Load ``unit``'s refrigerant tables and compile (or load) the cycle kernels, once."""
+    key = (unit.refrigerant, unit.discretisation.n_volumes)
+    if key in _READY:
+        return
+    timer = threading.Timer(ANNOUNCE_AFTER_SECONDS, _announce)
+    timer.daemon = True
+    if multiprocessing.parent_process() is None:
+        timer.start()
+    try:
+        _run_kernels(unit)
+    finally:
+        timer.cancel()
+    _READY.add(key)
