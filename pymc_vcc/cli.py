@@ -1,4 +1,8 @@
-"""The ``pymc-vcc`` command line: the paper's studies, the demo and the benchmarks."""
+"""The ``pymc-vcc`` command line: the paper's studies, the demo and the benchmarks.
+
+Every error is one line on standard error and exit status 2 (``--debug``: the traceback); an
+interrupted study says how to resume it.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +10,7 @@ import argparse
 import importlib
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from pymc_vcc.execution.executors import EXECUTOR_KINDS
@@ -24,6 +28,7 @@ def _settings(args: argparse.Namespace):
         resume=args.resume,
         seed=args.seed,
         progress=None if not args.json else False,
+        time_limit=args.time_limit,
     )
 
 
@@ -53,10 +58,12 @@ def _leak(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from pymc_vcc.execution.output_folder import claim_output_folder
     from pymc_vcc.physics.refrigerant.diagram import save_property_diagram
 
-    save_property_diagram(Path(args.out))
-    return _leak(args)
+    with claim_output_folder(args.out):
+        save_property_diagram(Path(args.out))
+        return _leak(args)
 
 
 def _estimate(args: argparse.Namespace) -> int:
@@ -122,6 +129,22 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive(kind: type[int] | type[float]) -> Callable[[str], int | float]:
+    """An argparse type: a number of ``kind`` greater than zero."""
+
+    def parse(text: str) -> int | float:
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if value is None or not value > 0 or value != value:
+            noun = "integer" if kind is int else "number"
+            raise argparse.ArgumentTypeError(f"must be a positive {noun}, got {text!r}")
+        return value
+
+    return parse
+
+
 def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -> None:
     parser.add_argument(
         "--budget",
@@ -131,7 +154,16 @@ def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -
     )
     parser.add_argument("--executor", choices=list(EXECUTOR_KINDS), default="processes")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="address of a Dask scheduler")
-    parser.add_argument("--workers", type=int, help="worker processes (default: every core)")
+    parser.add_argument(
+        "--workers", type=_positive(int), help="worker processes (default: every core)"
+    )
+    parser.add_argument(
+        "--time-limit",
+        type=_positive(float),
+        metavar="SECONDS",
+        help="wall-time limit of one simulation; a local worker running longer is stopped "
+        "and the simulation counted as failed (time-limit)",
+    )
     parser.add_argument("--out", default=out, help=f"results folder (default {out})")
     parser.add_argument("--resume", action="store_true", help="continue from checkpoints")
     parser.add_argument("--seed", type=int, default=0)
@@ -193,13 +225,41 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true", help="fewer repetitions")
     bench.add_argument("--only", nargs="+", metavar="NAME", help="run only these benchmarks")
     bench.set_defaults(handler=_bench)
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
+    for command in commands.choices.values():
+        command.add_argument(
+            "--debug",
+            action="store_true",
+            default=argparse.SUPPRESS,
+            help="show the traceback of an error",
+        )
     return parser
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run the sub-command; an error is one line and exit status 2 (unless ``--debug``)."""
+    try:
+        return args.handler(args)
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        resume = " (continue with --resume)" if getattr(args, "out", None) else ""
+        print(f"pymc-vcc {args.command}: interrupted{resume}", file=sys.stderr)
+        return 130
+    except Exception as error:
+        if args.debug:
+            raise
+        message = " ".join(str(error).split()) or type(error).__name__
+        print(
+            f"pymc-vcc {args.command}: error: {message} (--debug shows the traceback)",
+            file=sys.stderr,
+        )
+        return 2
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pymc-vcc`` console script."""
-    args = build_parser().parse_args(argv)
-    return args.handler(args)
+    return _run(build_parser().parse_args(argv))
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ import cloudpickle
 import numpy as np
 import pytest
 
-from pymc_vcc.execution.executors import DaskExecutor, make_executor
+from pymc_vcc.execution.executors import EXECUTOR_KINDS, DaskExecutor, make_executor
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.testing import Flaky, GaussianLocation
@@ -102,8 +102,9 @@ def test_closing_the_stream_early_stops_reading_items(kind, process_pool):
 def test_unknown_kind_and_bad_sizes_are_clear_errors():
     with pytest.raises(ValueError, match="unknown executor kind 'threads'"):
         make_executor("threads")
-    with pytest.raises(ValueError, match="n_workers must be >= 1"):
-        make_executor("processes", n_workers=0)
+    for kind in EXECUTOR_KINDS:  # refused before any worker starts, whatever the backend
+        with pytest.raises(ValueError, match="n_workers must be a positive integer, got 0"):
+            make_executor(kind, n_workers=0)
     with pytest.raises(ValueError, match="chunksize must be a positive integer"):
         make_executor("serial").map(abs, [1], chunksize=0)
 

@@ -51,6 +51,7 @@ import hashlib
 import logging
 import multiprocessing
 import os
+import socket
 import time
 from abc import ABC, abstractmethod
 from collections import deque
@@ -60,6 +61,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from itertools import islice
 from typing import Any, ClassVar, Literal
+from urllib.parse import urlsplit
 
 import cloudpickle
 
@@ -78,6 +80,14 @@ def available_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # platforms without sched_getaffinity
         return os.cpu_count() or 1
+
+
+def check_n_workers(n_workers: int | None) -> None:
+    """Refuse a worker count that is not None or a positive integer."""
+    if n_workers is not None and not (
+        isinstance(n_workers, int) and not isinstance(n_workers, bool) and n_workers >= 1
+    ):
+        raise ValueError(f"n_workers must be a positive integer, got {n_workers!r}")
 
 
 class _ChunkSizer:
@@ -331,9 +341,8 @@ class ProcessExecutor(_PickledFunctionExecutor):
     kind = "processes"
 
     def __init__(self, n_workers: int | None = None) -> None:
+        check_n_workers(n_workers)
         self.n_workers = available_cores() if n_workers is None else n_workers
-        if self.n_workers < 1:
-            raise ValueError(f"n_workers must be >= 1, got {self.n_workers}")
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["numpy", "xarray", "pymc_vcc.execution.executors"])
         self._pool = WorkerPool(context, self.n_workers)
@@ -383,13 +392,21 @@ class DaskExecutor(_PickledFunctionExecutor):
         n_workers: workers of a new local cluster (default: every core); with an address, wait
             until this many worker threads have joined.
         timeout: seconds to wait for workers to join, s.
+        connect_timeout: seconds to wait for the scheduler at ``address`` to answer, s.
+
+    Raises:
+        ConnectionError: no scheduler answers at ``address`` within ``connect_timeout``.
     """
 
     kind = "dask"
     _pins_crashes = False  # every task queued on a dying worker counts towards KilledWorker
 
     def __init__(
-        self, address: Any = None, n_workers: int | None = None, timeout: float = 60.0
+        self,
+        address: Any = None,
+        n_workers: int | None = None,
+        timeout: float = 60.0,
+        connect_timeout: float = 5.0,
     ) -> None:
         from distributed import Client, LocalCluster
 
@@ -403,7 +420,15 @@ class DaskExecutor(_PickledFunctionExecutor):
                 silence_logs=logging.ERROR,
             )
             address = self._cluster
-        self._client = Client(address, timeout=timeout)
+        try:
+            self._client = Client(
+                address, timeout=timeout if self._cluster is not None else connect_timeout
+            )
+        except OSError as error:
+            raise ConnectionError(
+                f"no Dask scheduler answers at {address} within {connect_timeout:g} s ({error}); "
+                "start one with `dask scheduler`, or check the address"
+            ) from None
         self._client.wait_for_workers(n_workers or 1, timeout=timeout)
         self.n_workers = sum(self._client.nthreads().values())
 
@@ -456,6 +481,24 @@ class DaskExecutor(_PickledFunctionExecutor):
             self._cluster.close()
 
 
+def check_scheduler(address: str, timeout: float = 3.0) -> None:
+    """Refuse at once a ``tcp://host:port`` Dask scheduler address where nothing listens.
+
+    Raises:
+        ConnectionError: no connection to ``address`` within ``timeout`` s.
+    """
+    parsed = urlsplit(address)
+    if parsed.scheme != "tcp" or parsed.hostname is None or parsed.port is None:
+        return  # other transports: left to the Dask client
+    try:
+        socket.create_connection((parsed.hostname, parsed.port), timeout=timeout).close()
+    except OSError as error:
+        raise ConnectionError(
+            f"no Dask scheduler answers at {address} ({error.strerror or error}); start one "
+            "with `dask scheduler`, or check the address"
+        ) from None
+
+
 def make_executor(
     kind: ExecutorKind = "processes",
     n_workers: int | None = None,
@@ -470,6 +513,7 @@ def make_executor(
             every core this process may use).
         address: for ``"dask"``: scheduler address or cluster object (None: start a local one).
     """
+    check_n_workers(n_workers)
     if kind == "serial":
         return SerialExecutor()
     if kind == "processes":

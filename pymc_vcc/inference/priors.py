@@ -47,6 +47,27 @@ def validate_bounds(bounds: Bounds) -> dict[str, tuple[float, float]]:
     return checked
 
 
+def check_prior_support(simulator: object, bounds: Bounds) -> None:
+    """Refuse prior bounds that reach outside the simulator's ``parameter_bounds``, if it has any.
+
+    Raises:
+        ValueError: naming the parameter, the prior's bounds and the allowed range.
+    """
+    allowed = getattr(simulator, "parameter_bounds", None)
+    if allowed is None:
+        return
+    for name, (low, high) in bounds.items():
+        if name not in allowed:
+            continue
+        allowed_low, allowed_high = allowed[name]
+        if low < allowed_low or high > allowed_high:
+            raise ValueError(
+                f"prior bounds of {name!r} ({low:g}, {high:g}) reach outside the simulator's "
+                f"parameter bounds [{allowed_low:g}, {allowed_high:g}]; narrow the prior, or "
+                "build the simulator with allow_outside_unit_bounds=True to extrapolate"
+            )
+
+
 class Prior(ABC):
     """A distribution over named parameters inside physical bounds.
 

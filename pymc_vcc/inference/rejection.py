@@ -35,7 +35,7 @@ from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
 from pymc_vcc.execution.store import SimulationRecord, SimulationStore
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import NOISE_PREFIX, add_output_noise, noise_parameter, with_noise
-from pymc_vcc.inference.priors import Prior
+from pymc_vcc.inference.priors import Prior, check_prior_support
 from pymc_vcc.inference.series import ObservedData, OutputData, Simulator, prepare_observed
 
 PILOT, MAIN = 0, 1
@@ -216,6 +216,7 @@ def _prepare_observed(
 
 
 def _model_names(simulator: Simulator, prior: Prior) -> tuple[str, ...]:
+    check_prior_support(simulator, prior.bounds)
     model = tuple(name for name in prior.names if not name.startswith(NOISE_PREFIX))
     expected = getattr(simulator, "parameter_names", None)
     if expected is not None and set(expected) != set(model):

@@ -27,7 +27,7 @@ from SALib.sample import sobol as sobol_sample
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
 from pymc_vcc.execution.outcomes import crash_outcome, run_simulation
 from pymc_vcc.execution.store import ResultRecord, ResultStore
-from pymc_vcc.inference.priors import validate_bounds
+from pymc_vcc.inference.priors import check_prior_support, validate_bounds
 from pymc_vcc.inference.series import OutputData, Simulator, prepare_observed
 
 
@@ -138,6 +138,7 @@ def sobol_indices(
         (parameter, output); attrs count simulations, failures and dropped base samples.
     """
     checked = validate_bounds(bounds)
+    check_prior_support(simulator, checked)
     names = tuple(checked)
     outputs = tuple(outputs)
     if not outputs:

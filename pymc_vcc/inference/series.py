@@ -23,7 +23,9 @@ Simulator = Callable[[Mapping[str, float], np.random.Generator], OutputData]
 
 It must be picklable (a module-level function, a ``functools.partial`` of one, or an instance of
 a module-level class) to run in other processes. Optional attributes ``parameter_names`` and
-``output_names`` (sequences of str) let samplers check priors and observed data before running.
+``output_names`` (sequences of str) let samplers check priors and observed data before running;
+``parameter_bounds`` (name -> (low, high), SI) is where the simulator is valid, and samplers
+refuse a prior that reaches outside it (:func:`pymc_vcc.inference.priors.check_prior_support`).
 """
 
 

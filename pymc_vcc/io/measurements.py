@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from pymc_vcc.io.plausibility import check_plausible
 from pymc_vcc.physics.cycle import OUTPUT_IDS, OUTPUT_INFO
 from pymc_vcc.physics.inputs import INPUT_IDS, make_inputs
 
@@ -460,6 +461,7 @@ def load_measurements(
         if missing_values[column] == values.size:
             raise ValueError(f"{path}: column {column!r} ({variable}) has no values (all empty)")
         raw[variable] = convert(values)
+        check_plausible(variable, column, raw[variable], unit)
 
     row_gaps = _gaps("rows", times, max_gap)
     outages = {(gap.start, gap.end) for gap in row_gaps}

@@ -307,6 +307,8 @@ class VCCSimulator:
     raised. ``outputs`` selects output ids; ``t_window = (t_start, t_end)`` simulates up to
     ``t_end`` and returns the outputs from ``t_start`` on. ``parameters`` names the ids a
     sampler calibrates (default: all 26); the others stay at nominal, or at ``fixed`` values.
+    Samplers refuse priors reaching outside the unit's parameter bounds
+    (``parameter_bounds``) unless ``allow_outside_unit_bounds=True`` (extrapolation).
     """
 
     def __init__(
@@ -320,6 +322,7 @@ class VCCSimulator:
         max_wall_time: float | None = None,
         parameters: Sequence[str] | None = None,
         fixed: Mapping[str, float] | None = None,
+        allow_outside_unit_bounds: bool = False,
     ) -> None:
         self.unit = load_unit() if unit is None else unit
         self.inputs = builtin_inputs() if inputs is None else inputs
@@ -346,11 +349,20 @@ class VCCSimulator:
         self.t_window = (t_start, t_stop)
         self.controller = controller
         self.max_wall_time = max_wall_time
+        self.allow_outside_unit_bounds = allow_outside_unit_bounds
         ensure_compiled(self.unit)
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         ensure_compiled(self.unit)  # in a worker: before any run's time limit starts
+
+    @property
+    def parameter_bounds(self) -> dict[str, tuple[float, float]] | None:
+        """The unit's bounds of the calibrated parameters (None with extrapolation allowed)."""
+        if self.allow_outside_unit_bounds:
+            return None
+        table = self.unit.parameters
+        return {pid: (table[pid].low, table[pid].high) for pid in self.parameter_names}
 
     def __call__(
         self, theta: Mapping[str, float], rng: np.random.Generator | None = None

@@ -19,7 +19,13 @@ from typing import Any, TypeVar
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.execution.executors import EXECUTOR_KINDS, Executor, make_executor
+from pymc_vcc.execution.executors import (
+    EXECUTOR_KINDS,
+    Executor,
+    check_n_workers,
+    check_scheduler,
+    make_executor,
+)
 from pymc_vcc.execution.output_folder import OutputFolderError, atomic_path, claim_output_folder
 
 T = TypeVar("T")
@@ -97,10 +103,7 @@ class StudySettings:
 
     def __post_init__(self) -> None:
         get_budget(self.budget)
-        if self.n_workers is not None and not (
-            isinstance(self.n_workers, int) and self.n_workers >= 1
-        ):
-            raise ValueError(f"n_workers must be a positive integer, got {self.n_workers!r}")
+        check_n_workers(self.n_workers)
         if self.time_limit is not None and not self.time_limit > 0:
             raise ValueError(
                 f"time_limit must be a positive number of seconds, got {self.time_limit!r}"
@@ -111,6 +114,8 @@ class StudySettings:
             )
         if self.scheduler is not None and self.executor != "dask":
             raise ValueError("scheduler is the address of a Dask scheduler: use executor='dask'")
+        if self.scheduler is not None:
+            check_scheduler(self.scheduler)
         if self.out is not None:
             object.__setattr__(self, "out", Path(self.out))
 

@@ -35,7 +35,7 @@ from pytensor.tensor.variable import TensorVariable
 from pymc_vcc.execution.outcomes import SimulationOutcome, run_simulation
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import NOISE_PREFIX, add_output_noise, noise_parameter, with_noise
-from pymc_vcc.inference.priors import Bounds, GMMPrior, Prior, UniformPrior
+from pymc_vcc.inference.priors import Bounds, GMMPrior, Prior, UniformPrior, check_prior_support
 from pymc_vcc.inference.series import ObservedData, OutputData, Simulator, prepare_observed
 
 
@@ -350,6 +350,7 @@ def add_simulator(
     if noise is not None and not isinstance(noise, Mapping):
         noise = dict.fromkeys(data.names, noise)
     prior = with_noise(prior, noise, data.names)
+    check_prior_support(simulator, prior.bounds)
 
     noise_outputs = tuple(out for out in data.names if noise_parameter(out) in prior.names)
     stray_noise = [
