@@ -16,7 +16,7 @@ import pytest
 import xarray as xr
 
 from pymc_vcc.execution.executors import make_executor
-from pymc_vcc.execution.store import CheckpointMismatchError
+from pymc_vcc.execution.store import CheckpointDamagedError, CheckpointMismatchError
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.testing import GaussianLocation, Recording
@@ -208,3 +208,23 @@ def test_a_checkpoint_refuses_a_run_with_other_arguments(tmp_path):
         )
     with pytest.raises(CheckpointMismatchError, match="observed_digest"):
         abc_rejection(MODEL, UniformPrior(MODEL.bounds), OBSERVED + 1.0, **arguments, **SETTINGS)
+
+
+def test_a_damaged_checkpoint_is_refused_naming_the_file(tmp_path):
+    checkpoint = tmp_path / "run.sqlite"
+    checkpoint.write_bytes(b"this is not a database, it was overwritten" * 100)
+    arguments = dict(distance=MODEL.distance, executor="serial", checkpoint=checkpoint)
+    with pytest.raises(CheckpointDamagedError, match=rf"checkpoint {checkpoint} is damaged"):
+        abc_rejection(MODEL, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **SETTINGS)
+
+
+def test_an_altered_row_is_refused_rather_than_change_the_posterior(tmp_path):
+    checkpoint = tmp_path / "run.sqlite"
+    arguments = dict(distance=MODEL.distance, executor="serial", checkpoint=checkpoint)
+    abc_rejection(MODEL, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **SETTINGS)
+    connection = sqlite3.connect(checkpoint)
+    with connection:
+        connection.execute("UPDATE simulations SET distance = 0.0 WHERE phase = 1 AND idx = 7")
+    connection.close()
+    with pytest.raises(CheckpointDamagedError, match="simulation 1/7 fails its checksum"):
+        abc_rejection(MODEL, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **SETTINGS)

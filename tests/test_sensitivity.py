@@ -1,5 +1,7 @@
 """Sobol indices against the Ishigami function's exact values, with and without failures."""
 
+import sqlite3
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -86,3 +88,34 @@ def test_bad_arguments_are_clear_errors():
         sobol_indices(ishigami, BOUNDS, [], executor="serial")
     with pytest.raises(ValueError, match="window"):
         sobol_indices(ishigami, BOUNDS, ["ishigami"], window=(5.0, 1.0), executor="serial")
+
+
+class CountingIshigami:
+    """The Ishigami model counting its runs; raises KeyboardInterrupt (Ctrl-C) at run ``stop``."""
+
+    def __init__(self, stop=None):
+        self.stop, self.runs = stop, 0
+
+    def __call__(self, theta, rng):
+        self.runs += 1
+        if self.runs == self.stop:
+            raise KeyboardInterrupt
+        return sometimes_failing_ishigami(theta, rng)
+
+
+def test_an_interrupted_sobol_run_resumes_without_rerunning_and_gives_the_same_indices(tmp_path):
+    arguments = dict(n_base=64, window=None, executor="serial", seed=3)
+    reference = sobol_indices(CountingIshigami(), BOUNDS, ["ishigami"], **arguments)
+    checkpoint = tmp_path / "sobol.sqlite"
+    with pytest.raises(KeyboardInterrupt):
+        sobol_indices(
+            CountingIshigami(stop=200), BOUNDS, ["ishigami"], checkpoint=checkpoint, **arguments
+        )
+    connection = sqlite3.connect(checkpoint)
+    (persisted,) = connection.execute("SELECT COUNT(*) FROM results").fetchone()
+    connection.close()
+    assert 0 < persisted < 200
+    resumed_model = CountingIshigami()
+    resumed = sobol_indices(resumed_model, BOUNDS, ["ishigami"], checkpoint=checkpoint, **arguments)
+    assert resumed_model.runs == 64 * 5 - persisted  # none of the persisted runs ran again
+    xr.testing.assert_identical(resumed, reference)

@@ -59,7 +59,27 @@ def _log_or_die(item: tuple[str, float, Path]) -> str:
     return action
 
 
-KILLS = {"segfault": _segfault, "exit": _exit}
+HANG_SECONDS = 60.0
+
+
+def _hang() -> None:
+    """Sleep with the alarm signal blocked: like compiled code that never returns to Python."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGALRM})
+    try:
+        time.sleep(HANG_SECONDS)
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGALRM})
+
+
+def _sleep_or_hang(seconds: float) -> float:
+    if seconds == HANG_SECONDS:
+        _hang()
+    else:
+        time.sleep(seconds)
+    return seconds
+
+
+KILLS = {"segfault": _segfault, "exit": _exit, "hang": _hang}
 
 
 @dataclass(frozen=True)
@@ -182,6 +202,32 @@ def test_abc_counts_crashes_as_failures_and_matches_the_serial_run(pool, tmp_pat
         CRASHING.raising(), prior, OBSERVED, executor="serial", checkpoint=checkpoint, **settings
     )
     np.testing.assert_array_equal(resumed.sample_stats["sim_status"], status)
+
+
+def test_an_item_over_its_time_limit_is_stopped_and_its_worker_replaced(pool):
+    items = [0.01, HANG_SECONDS, 0.01, 0.02]
+    results = pool.map(_sleep_or_hang, items, time_limit=1.0)
+    assert [results[k] for k in (0, 2, 3)] == [0.01, 0.01, 0.02]
+    assert isinstance(results[1], WorkerCrash) and results[1].kind == "time-limit"
+    assert "over its time limit of 2 s" in results[1].reason  # 1 s per item and 1 s of grace
+    assert pool.map(abs, [-1, -2]) == [1, 2]  # a new worker took the stopped one's place
+
+
+def test_abc_counts_runs_stopped_for_their_time_limit(pool):
+    hanging = Crashing(BASE, ((2.0, 2.1, "hang"),))
+    settings = dict(n_pilot=60, quantile=0.2, n_main=60, n_desired=60, seed=4, time_limit=0.5)
+    tree = abc_rejection(
+        hanging,
+        UniformPrior(BASE.bounds),
+        OBSERVED,
+        executor=pool,
+        distance=BASE.distance,
+        **settings,
+    )
+    stats = tree.sample_stats
+    doomed = hanging.doomed(tree.prior["mu"].values.ravel())
+    assert doomed.sum() >= 1
+    np.testing.assert_array_equal(stats["sim_status"].values == "time-limit", doomed)
 
 
 def test_predictive_and_sensitivity_count_crashed_runs(pool):

@@ -177,8 +177,9 @@ class _CheckpointFile:
             raise self._damaged(str(error)) from None
         for *fields, checksum in rows:
             if self._checksum(tuple(fields)) != checksum:
+                key = "/".join(map(str, fields[:-4]))  # the fields before the 4 of its result
                 raise self._damaged(
-                    f"the row of simulation {fields[:-4]} fails its checksum: altered or corrupted"
+                    f"the row of simulation {key} fails its checksum: altered or corrupted"
                 )
         return [tuple(fields) for *fields, _ in rows]
 
