@@ -21,3 +21,28 @@ def test_unknown_benchmark_is_a_clear_error():
 def test_parser_requires_a_command():
     with pytest.raises(SystemExit):
         build_parser().parse_args([])
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["--workers", "0"], "argument --workers: must be a positive integer, got '0'"),
+        (["--time-limit", "-3"], "argument --time-limit: must be a positive number"),
+    ],
+)
+def test_bad_numbers_are_refused_by_every_executor(arguments, message, capsys):
+    for executor in ("serial", "processes", "dask"):
+        with pytest.raises(SystemExit) as exit_info:
+            main(["sobol", "--executor", executor, *arguments])
+        assert exit_info.value.code == 2
+        assert message in capsys.readouterr().err
+
+
+def test_errors_are_one_line_and_exit_2_and_debug_shows_the_traceback(tmp_path, capsys):
+    dead = ["--executor", "dask", "--scheduler", "tcp://127.0.0.1:9", "--out", str(tmp_path)]
+    assert main(["sobol", *dead]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "Traceback" not in error
+    assert "no Dask scheduler answers at tcp://127.0.0.1:9" in error
+    with pytest.raises(ConnectionError, match="no Dask scheduler answers"):
+        main(["sobol", *dead, "--debug"])

@@ -282,3 +282,17 @@ def test_missing_file_and_bad_settings(tmp_path):
         load_measurements(path, COLUMNS, time_column="t", max_gap=0.5)
     with pytest.raises(ValueError, match="unknown time_unit 'days'"):
         load_measurements(path, COLUMNS, time_column="t", time_unit="days")
+
+
+@pytest.mark.parametrize(
+    ("header", "values", "message"),
+    [
+        ("PD [Pa]", {"pd": "27.0"}, r"column 'PD' \(PD.*median 27 Pa .*look like bar, not Pa"),
+        ("TD [K]", {"td": "68.0"}, r"column 'TD' \(TD.*median 68 K .*look like degC, not K"),
+    ],
+)
+def test_outputs_implausible_for_their_declared_unit_are_refused(tmp_path, header, values, message):
+    wrong = HEADER.replace(header.replace("[Pa]", "[bar]").replace("[K]", "[degC]"), header)
+    path = _write(tmp_path / "log.csv", _rows(np.arange(0.0, 40.0, 2.0), **values), wrong)
+    with pytest.raises(ValueError, match=message):
+        load_measurements(path, COLUMNS, time_column="t")

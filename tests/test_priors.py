@@ -7,7 +7,13 @@ from scipy import stats
 from scipy.integrate import trapezoid
 from scipy.special import expit, logit
 
-from pymc_vcc.inference.priors import GMMPrior, UniformPrior, load_prior, validate_bounds
+from pymc_vcc.inference.priors import (
+    GMMPrior,
+    UniformPrior,
+    check_prior_support,
+    load_prior,
+    validate_bounds,
+)
 
 BOUNDS = {"M0": (0.9, 2.2), "CF_VOL": (0.5, 1.5)}
 
@@ -133,3 +139,26 @@ def test_gmm_fit_rejects_bad_samples():
         GMMPrior.fit(np.ones((5, 2)), BOUNDS, max_components=0)
     with pytest.raises(ValueError, match="NaN"):
         GMMPrior.fit(np.array([[1.0, np.nan], [1.0, 1.0]]), BOUNDS)
+
+
+def test_prior_bounds_outside_the_units_are_refused_by_every_sampler():
+    import pymc as pm
+
+    from pymc_vcc.inference.pymc.model import add_simulator
+    from pymc_vcc.inference.rejection import abc_rejection
+    from pymc_vcc.inference.sensitivity import sobol_indices
+    from pymc_vcc.physics.simulate import VCCSimulator
+
+    simulator = VCCSimulator(parameters=["M0"], outputs=["PD"])
+    observed = np.ones((1, 5))  # never simulated: refused first
+    wide = {"M0": (0.1, 5.0)}
+    message = r"prior bounds of 'M0' \(0.1, 5\) .* parameter bounds \[0.9, 2.2\]"
+    with pytest.raises(ValueError, match=message):
+        abc_rejection(simulator, UniformPrior(wide), observed, executor="serial")
+    with pytest.raises(ValueError, match=message), pm.Model():
+        add_simulator("vcc", simulator, observed, prior=wide)
+    with pytest.raises(ValueError, match=message):
+        sobol_indices(simulator, wide, ["PD"], executor="serial")
+    extrapolating = VCCSimulator(parameters=["M0"], outputs=["PD"], allow_outside_unit_bounds=True)
+    check_prior_support(extrapolating, wide)  # asked for explicitly: allowed
+    check_prior_support(simulator, {"M0": (1.0, 2.0)})

@@ -127,7 +127,6 @@ def simulate(
     """
     unit = _builtin_unit() if unit is None else unit
     ensure_compiled(unit)  # before the wall clock starts: compiling is not simulating
-    started = time.perf_counter()
     inputs = builtin_inputs() if inputs is None else inputs
     validate_inputs(inputs)
     if t_end is not None:
@@ -138,6 +137,7 @@ def simulate(
         raise ValueError(f"output_interval must be positive, got {dt}")
     limit = unit.solver.max_wall_time if max_wall_time is None else float(max_wall_time)
 
+    started = time.perf_counter()
     edges, held = input_segments(inputs)
     times = np.arange(0.0, edges[-1] + 1e-9 * edges[-1], dt)
     tables = _fluid(unit.refrigerant).tables

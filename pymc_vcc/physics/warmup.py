@@ -1,11 +1,12 @@
 """Compile the cycle model once per process, before any simulation's wall clock starts.
 
 The cycle's Numba kernels compile on their first call (``cache=True`` keeps the machine code on
-disk, so later processes only load it) and the refrigerant tables are built from CoolProp on the
-first use of a fluid. Neither is part of a simulation: :func:`ensure_compiled` does both ahead
-of time, so that a wall-clock or sampler time limit never counts them and a run's result never
-depends on whether the caches were warm. A first compile that takes long is announced on
-standard error (in the main process only: worker processes load the code it cached).
+disk, so later processes only load it), the refrigerant tables are built from CoolProp on the
+first use of a fluid, and xarray imports its optional array backends (Dask) on its first Dataset.
+None of it is part of a simulation: :func:`ensure_compiled` does it all ahead of time, so that
+a wall-clock or sampler time limit never counts it and a run's result never depends on whether
+the caches were warm. A compile (no cached code yet) that takes long is announced on standard
+error, in the main process only (worker processes load the code it cached).
 """
 
 from __future__ import annotations
@@ -13,8 +14,10 @@ from __future__ import annotations
 import multiprocessing
 import sys
 import threading
+from pathlib import Path
 
 import numpy as np
+import xarray as xr
 
 from pymc_vcc.physics.cycle import (
     N_EVAL,
@@ -46,6 +49,14 @@ def _announce() -> None:
     )
 
 
+def _is_cached() -> bool:
+    """Whether Numba's disk cache holds the cycle kernels (then they load, not compile)."""
+    try:
+        return Path(evaluate._cache._cache_file._index_path).exists()
+    except AttributeError:  # Numba internals changed: assume a compile
+        return False
+
+
 def _run_kernels(unit: Unit) -> None:
     """Call every kernel the driver calls, at the unit's rating point and nominal parameters."""
     from pymc_vcc.physics.refrigerant import load_refrigerant
@@ -59,6 +70,7 @@ def _run_kernels(unit: Unit) -> None:
     evaluate(y, u, c, tables, dydt, np.empty(N_EVAL))
     jacobian(y, u, c, tables, dydt.copy())
     outputs_along(y[np.newaxis, :], u[np.newaxis, :], c, tables)
+    xr.Dataset({"y": ("time", y)})  # xarray imports its array backends on first use (seconds)
 
 
 def ensure_compiled(unit: Unit) -> None:
@@ -68,7 +80,7 @@ def ensure_compiled(unit: Unit) -> None:
         return
     timer = threading.Timer(ANNOUNCE_AFTER_SECONDS, _announce)
     timer.daemon = True
-    if multiprocessing.parent_process() is None:
+    if multiprocessing.parent_process() is None and not _is_cached():
         timer.start()
     try:
         _run_kernels(unit)

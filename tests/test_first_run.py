@@ -1,0 +1,47 @@
+"""The first run on a fresh machine: compiling the model never counts against a simulation's
+wall-clock limit, is announced on screen, and gives the same numbers as a warm cache."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from pymc_vcc.physics.simulate import simulate
+
+FIRST_RUN = textwrap.dedent(
+    """
+    import sys
+    from pymc_vcc.physics.simulate import simulate
+
+    result = simulate(t_end=100.0, max_wall_time=2.0)  # far less than a cold compile
+    print(result.attrs["status"], result.attrs["failure_reason"])
+    result.to_netcdf(sys.argv[1], engine="h5netcdf")
+    """
+)
+
+
+@pytest.mark.slow
+def test_the_first_run_with_an_empty_cache_passes_and_matches_a_warm_one(tmp_path):
+    caches = {
+        "NUMBA_CACHE_DIR": str(tmp_path / "numba"),
+        "PYMC_VCC_CACHE": str(tmp_path / "tables"),
+    }
+    out = tmp_path / "first.nc"
+    run = subprocess.run(
+        [sys.executable, "-c", FIRST_RUN, str(out)],
+        env={**os.environ, **caches},
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "ok"
+    assert "compiling the cycle model, once" in run.stderr
+    first = xr.open_dataset(out, engine="h5netcdf")
+    warm = simulate(t_end=100.0)
+    for name in warm.data_vars:
+        np.testing.assert_array_equal(first[name].values, warm[name].values)
