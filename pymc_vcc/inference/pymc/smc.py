@@ -127,6 +127,8 @@ class _BatchLikelihood:
         others = [rv for rv in model.observed_RVs if rv not in nodes]
         self.functions = tuple(type(rv.owner.op).fn for rv in nodes)
         self.n_nodes = len(nodes)
+        limits = [getattr(fn, "time_limit_s", None) for fn in self.functions]
+        self.time_limit = max((limit for limit in limits if limit is not None), default=None)
 
         node_inputs: list = []
         self._slices = []
@@ -313,7 +315,9 @@ class ParallelIMH(IMH):
         records: list[LikelihoodRecord | None] = [self._finished.get(key) for key in keys]
         todo = [number for number, record in enumerate(records) if record is None]
         chunks = self.executor.imap_chunks(
-            partial(_simulate, self._likelihood.functions), (tasks[number] for number in todo)
+            partial(_simulate, self._likelihood.functions),
+            (tasks[number] for number in todo),
+            time_limit=self._likelihood.time_limit,
         )
         try:
             for chunk in chunks:
