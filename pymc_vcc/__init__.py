@@ -24,7 +24,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "load_inputs_csv",
         "make_inputs",
     ),
-    "pymc_vcc.physics.cycle": ("OUTPUT_IDS",),
+    "pymc_vcc.physics.cycles": ("OUTPUT_IDS",),
     "pymc_vcc.physics.simulate": ("VCCSimulator", "operating_point"),
     "pymc_vcc.io.measurements": ("load_measurements", "Measurements", "example_log_path"),
     "pymc_vcc.inference.distances": ("ks_distance", "ks_distances"),

@@ -6,7 +6,7 @@ import pickle
 import numpy as np
 import pytest
 
-from pymc_vcc.physics.cycle import OUTPUT_IDS
+from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.inputs import builtin_inputs, constant_inputs
 from pymc_vcc.physics.simulate import VCCSimulator, operating_point, simulate
 from pymc_vcc.physics.unit import load_unit

@@ -56,6 +56,11 @@ def _mutated(mutate):
         (lambda d: d["parameters"].pop("L_VAP"), "L_VAP"),
         (lambda d: d["parameters"].update(X1={}), "X1"),
         (lambda d: d["unit"].update(refrigerant="R999"), "R999"),
+        (
+            lambda d: d["unit"].update(cycle="chiller"),
+            r"\[unit\] cycle: unknown cycle 'chiller'; allowed cycles are",
+        ),
+        (lambda d: d["unit"].update(cycle=3), r"\[unit\] cycle: expected a name, got 3"),
     ],
 )
 def test_bad_unit_descriptions_are_clear_errors(mutate, message):
