@@ -19,6 +19,10 @@ import xarray as xr
 BUILTIN_PROFILE = "fig4_steps.csv"
 """File name of the built-in 2120 s step profile inside ``pymc_vcc/data``."""
 
+WINTER_PROFILE = "winter_day_steps.csv"
+"""A winter day for the heat pump in ``pymc_vcc/data``: 2400 s of steps, outdoor -7 to 8 °C,
+indoor 20 to 22 °C, the compressor faster when it is colder."""
+
 
 @dataclass(frozen=True)
 class InputSpec:
@@ -162,10 +166,14 @@ def _inputs_from_csv_text(text: str, source: str) -> xr.Dataset:
     return make_inputs(table[:, 0], **values)
 
 
-def builtin_inputs() -> xr.Dataset:
-    """The built-in 2120 s step profile (the paper's Fig. 4 kind: every input stepped)."""
-    text = resources.files("pymc_vcc").joinpath("data", BUILTIN_PROFILE).read_text()
-    return _inputs_from_csv_text(text, BUILTIN_PROFILE)
+def builtin_inputs(name: str = BUILTIN_PROFILE) -> xr.Dataset:
+    """A shipped profile: by default the 2120 s step profile (the paper's Fig. 4 kind: every
+    input stepped); :data:`WINTER_PROFILE` is the heat pump's winter day."""
+    shipped = (BUILTIN_PROFILE, WINTER_PROFILE)
+    if name not in shipped:
+        raise ValueError(f"unknown shipped profile {name!r}; shipped are {list(shipped)}")
+    text = resources.files("pymc_vcc").joinpath("data", name).read_text()
+    return _inputs_from_csv_text(text, name)
 
 
 def constant_inputs(

@@ -26,6 +26,11 @@ if TYPE_CHECKING:
 BUILTIN_UNIT = "split_3p5kw_r410a.toml"
 """File name of the built-in unit description inside ``pymc_vcc/data``."""
 
+HEAT_PUMP_UNIT = "heat_pump_3p5kw_r410a.toml"
+"""The same split unit as a heat pump in heating mode, inside ``pymc_vcc/data``."""
+
+SHIPPED_UNITS = (BUILTIN_UNIT, HEAT_PUMP_UNIT)
+
 
 @dataclass(frozen=True)
 class Discretisation:
@@ -354,14 +359,18 @@ def unit_to_dict(unit: Unit) -> dict[str, Any]:
 
 
 def load_unit(path: str | Path | None = None) -> Unit:
-    """Load and validate a unit description; ``None`` loads the built-in 3.5 kW R410A split."""
-    if path is None:
-        text = resources.files("pymc_vcc").joinpath("data", BUILTIN_UNIT).read_text()
-        source = BUILTIN_UNIT
+    """Load and validate a unit description: a TOML file, or the file name of a shipped one
+    (:data:`SHIPPED_UNITS`); ``None`` loads the built-in 3.5 kW R410A split in cooling mode."""
+    name = BUILTIN_UNIT if path is None else str(path)
+    if name in SHIPPED_UNITS and (path is None or not Path(name).is_file()):
+        text = resources.files("pymc_vcc").joinpath("data", name).read_text()
+        source = name
     else:
-        path = Path(path)
+        path = Path(name)
         if not path.is_file():
-            raise FileNotFoundError(f"unit description {path} does not exist")
+            raise FileNotFoundError(
+                f"unit description {path} does not exist (shipped units: {list(SHIPPED_UNITS)})"
+            )
         text = path.read_text()
         source = str(path)
     try:

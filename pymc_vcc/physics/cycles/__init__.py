@@ -9,10 +9,13 @@
 from __future__ import annotations
 
 from pymc_vcc.physics.cycles.base import CycleModel, StateLayout
+from pymc_vcc.physics.cycles.heat_pump_heating import HeatPumpHeating
 from pymc_vcc.physics.cycles.split_cooling import SplitCooling
 from pymc_vcc.physics.cycles.split_unit import OUTPUT_INFO
 
-CYCLE_MODELS: dict[str, CycleModel] = {model.name: model for model in (SplitCooling(),)}
+CYCLE_MODELS: dict[str, CycleModel] = {
+    model.name: model for model in (SplitCooling(), HeatPumpHeating())
+}
 """The shipped cycle models by the name a unit description gives in ``[unit] cycle``."""
 
 OUTPUT_IDS: tuple[str, ...] = tuple(OUTPUT_INFO)
