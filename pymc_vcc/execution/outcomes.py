@@ -28,7 +28,8 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.executors import WorkerCrash
-from pymc_vcc.inference.series import InvalidOutputError, ObservedData, Simulator, extract_outputs
+from pymc_vcc.inference.series import InvalidOutputError, ObservedData, extract_outputs
+from pymc_vcc.inference.simulator import Simulator
 
 OK = "ok"
 WORKER_CRASH = "worker-crash"

@@ -23,7 +23,8 @@ from SALib.sample import sobol as sobol_sample
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
 from pymc_vcc.execution.outcomes import WORKER_CRASH, run_simulation
 from pymc_vcc.inference.priors import validate_bounds
-from pymc_vcc.inference.series import OutputData, Simulator, prepare_observed
+from pymc_vcc.inference.series import OutputData, prepare_observed
+from pymc_vcc.inference.simulator import Simulator
 
 
 @dataclass(frozen=True)

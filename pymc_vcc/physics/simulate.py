@@ -364,6 +364,11 @@ class VCCSimulator:
         result = result[list(self.output_names)]
         return result.sel(time=slice(self.t_window[0], None))
 
+    @property
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        """Bounds (low, high) of every parameter of the unit's table, SI units."""
+        return {spec.id: (spec.low, spec.high) for spec in self.unit.parameters}
+
     def __repr__(self) -> str:
         return (
             f"VCCSimulator(unit={self.unit.name!r}, outputs={list(self.output_names)}, "
