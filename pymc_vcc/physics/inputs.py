@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+from numpy.typing import ArrayLike
 
 BUILTIN_PROFILE = "fig4_steps.csv"
 """File name of the built-in 2120 s step profile inside ``pymc_vcc/data``."""
@@ -48,7 +49,7 @@ INPUT_IDS: tuple[str, ...] = tuple(spec.id for spec in INPUTS)
 _CELSIUS_OFFSET = 273.15
 
 
-def make_inputs(time: np.ndarray, **values: np.ndarray) -> xr.Dataset:
+def make_inputs(time: ArrayLike, **values: ArrayLike) -> xr.Dataset:
     """Build and validate an input Dataset from arrays in SI units (one value per time)."""
     time = np.asarray(time, dtype=float)
     data_vars = {}
@@ -90,7 +91,7 @@ def validate_inputs(inputs: xr.Dataset) -> None:
     missing = [pid for pid in INPUT_IDS if pid not in inputs.data_vars]
     if missing:
         raise ValueError(f"inputs: missing variable(s) {missing}; required are {INPUT_IDS}")
-    unknown = sorted(set(inputs.data_vars) - set(INPUT_IDS))
+    unknown = sorted(str(name) for name in set(inputs.data_vars) - set(INPUT_IDS))
     if unknown:
         raise ValueError(f"inputs: unknown variable(s) {unknown}; allowed are {INPUT_IDS}")
     for spec in INPUTS:

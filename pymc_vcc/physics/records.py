@@ -21,9 +21,10 @@ def make_record(dtype: np.dtype, values: Mapping[str, Any]) -> np.void:
     if unknown or missing:
         raise ValueError(f"record fields: unknown {unknown}, missing {missing}; expected {names}")
     record = np.zeros(1, dtype=dtype)
+    fields: Mapping[str, tuple] = dtype.fields or {}
     for name in names:
         value = values[name]
-        field = dtype.fields[name][0]
+        field = fields[name][0]
         if field.names is not None and isinstance(value, Mapping):
             value = make_record(field, value)
         record[name] = value

@@ -410,7 +410,7 @@ def operating_point(
         controller=controller,
         output_interval=10.0,
     )
-    final = {name: float(result[name].values[-1]) for name in result.data_vars}
+    final = {str(name): float(result[name].values[-1]) for name in result.data_vars}
     tables = _fluid(unit.refrigerant).tables
     recent = result.sel(time=slice(duration - 100.0, None))
     model = unit.cycle_model
@@ -419,7 +419,8 @@ def operating_point(
         for name in model.output_ids
     )
     capacity = final[model.capacity]
-    return final | {
+    summary: dict[str, float | str] = dict(final)
+    return summary | {
         "superheat": final["TS"] - saturation_state(tables, final["PS"])[0],
         "subcooling": saturation_state(tables, final["PC"])[0] - final["TC"],
         "capacity": capacity,
