@@ -88,7 +88,7 @@ def test_charge_that_does_not_fit_is_an_error(setup):
 def test_mass_changes_only_by_the_controller_source(setup):
     _, model, tables, c, y, inputs = setup
     c = c.copy()
-    c["controller"]["m0"] *= 1.01  # a mass error, so the source is non-zero
+    c[0]["controller"]["m0"] *= 1.01  # a mass error, so the source is non-zero
     y = y.copy()
     y[-1] = 0.3  # and an integral term
     dydt = np.empty(y.size)
@@ -107,8 +107,8 @@ def test_mass_changes_only_by_the_controller_source(setup):
 
 def test_controller_switch_and_gains(setup):
     unit, model, _, _, _, _ = setup
-    on = model.constants(unit, unit.parameters.nominal)["controller"]
-    off = model.constants(unit, unit.parameters.nominal, controller=False)["controller"]
+    on = model.constants(unit, unit.parameters.nominal)[0]["controller"]
+    off = model.constants(unit, unit.parameters.nominal, controller=False)[0]["controller"]
     assert on["kp"] == unit.controller.kp and on["ki"] == pytest.approx(on["kp"] ** 2 / 4)
     assert off["kp"] == 0.0 and off["ki"] == 0.0
 

@@ -125,8 +125,8 @@ class StateLayout:
 class CycleModel(ABC):
     """One cycle topology: its parameters, outputs, state layout and Numba kernels.
 
-    Kernels (Numba dispatchers; ``c`` is the record of :meth:`constants`, ``u`` the inputs
-    ordered as :data:`~pymc_vcc.physics.inputs.INPUT_IDS`):
+    Kernels (Numba dispatchers; ``c`` is the one-element record array of :meth:`constants`,
+    ``u`` the inputs ordered as :data:`~pymc_vcc.physics.inputs.INPUT_IDS`):
 
     * ``evaluate(y, u, c, tables, dydt, out) -> bool``: dy/dt into ``dydt``, outputs then
       diagnostics into ``out``; False when a property left the tables;
@@ -166,18 +166,23 @@ class CycleModel(ABC):
         """The state layout for ``n_volumes`` cells per heat exchanger."""
 
     @abstractmethod
-    def constants(self, unit: Unit, theta: np.ndarray, controller: bool | None = None) -> np.void:
-        """The constants record from a unit and a parameter vector ordered as
-        :attr:`parameters`; ``controller`` overrides the unit's charge-controller switch."""
+    def constants(
+        self, unit: Unit, theta: np.ndarray, controller: bool | None = None
+    ) -> np.ndarray:
+        """The constants record (a one-element structured array) from a unit and a parameter
+        vector ordered as :attr:`parameters`; ``controller`` overrides the unit's
+        charge-controller switch."""
 
     @abstractmethod
-    def initial_state(self, c: np.void, n_volumes: int, inputs: np.ndarray, tables) -> np.ndarray:
+    def initial_state(
+        self, c: np.ndarray, n_volumes: int, inputs: np.ndarray, tables
+    ) -> np.ndarray:
         """A state holding exactly the charge :meth:`charge` at the first inputs ``inputs``;
         ``ValueError`` if the unit cannot hold it."""
 
-    def charge(self, c: np.void) -> float:
+    def charge(self, c: np.ndarray) -> float:
         """The charge M0 the controller holds, kg."""
-        return float(c["controller"]["m0"])
+        return float(c[0]["controller"]["m0"])
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"

@@ -93,9 +93,10 @@ def cell_volumes(c):
 
 
 @njit(cache=True, error_model="numpy")
-def evaluate(y, u, c, tables, dydt, out):
+def evaluate(y, u, constants, tables, dydt, out):
     """Right-hand side and outputs at state ``y`` under inputs ``u`` = (valve opening,
     compressor speed Hz, T_ambient K, T_indoor K); see :class:`~.base.CycleModel`."""
+    c = constants[0]
     props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
     cell_properties(y, c.layout.zones, tables, props)
     return balances(y, u, c, tables, props, dydt, out)
@@ -246,9 +247,10 @@ def balances(y, u, c, tables, props, dydt, out):
 
 
 @njit(cache=True, error_model="numpy")
-def jacobian(y, u, c, tables, f0):
+def jacobian(y, u, constants, tables, f0):
     """Dense forward-difference Jacobian ∂f/∂y at ``y`` (``f0`` = f(y)); each column
     re-evaluates only the cell properties its variable touches."""
+    c = constants[0]
     zones = c.layout.zones
     jac = np.empty((y.size, y.size))
     props = np.empty((N_PROPERTIES, zones[:, 1].sum()))
@@ -267,20 +269,21 @@ def jacobian(y, u, c, tables, f0):
 
 
 @njit(cache=True, error_model="numpy")
-def outputs_along(ys, us, c, tables):
+def outputs_along(ys, us, constants, tables):
     """Outputs and diagnostics at each row of states ``ys`` with the matching inputs ``us``."""
     result = np.empty((ys.shape[0], N_EVAL))
     dydt = np.empty(ys.shape[1])
     out = np.empty(N_EVAL)
     for k in range(ys.shape[0]):
-        evaluate(ys[k], us[k], c, tables, dydt, out)
+        evaluate(ys[k], us[k], constants, tables, dydt, out)
         result[k] = out
     return result
 
 
 @njit(cache=True, error_model="numpy")
-def total_mass(y, c, tables):
+def total_mass(y, constants, tables):
     """Total refrigerant mass M(y), kg (NaN if a property left the tables)."""
+    c = constants[0]
     props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
     cell_properties(y, c.layout.zones, tables, props)
     return stored_mass(cell_volumes(c), props[1])
@@ -293,12 +296,12 @@ def _quality_enthalpy(tables, p, x):
 
 
 @njit(cache=True, error_model="numpy")
-def filled_state(s, p_c, p_e, c, tables):
+def filled_state(s, p_c, p_e, constants, tables):
     """A running-cycle state at pressures p_c, p_e whose charge grows monotonically with the fill
     level ``s`` in [-1, 2]: s < 0 leaves the condenser outlet and liquid line two-phase (up to
     quality 0.3), s in [0, 1] moves the end of condensation from the outlet to a fifth of the
     coil, s > 1 fills the suction tank with liquid. Walls start at the fluid temperature."""
-    at = c.layout
+    at = constants[0].layout
     n = at.h_liquid_line - at.h_cond
     y = np.zeros(at.size)
     x_end = -0.08 + 0.38 * max(-s, 0.0)
@@ -339,11 +342,15 @@ class HeatPumpHeating(CycleModel):
     def layout(self, n_volumes: int) -> StateLayout:
         return layout(n_volumes)
 
-    def constants(self, unit: Unit, theta: np.ndarray, controller: bool | None = None) -> np.void:
+    def constants(
+        self, unit: Unit, theta: np.ndarray, controller: bool | None = None
+    ) -> np.ndarray:
         n = unit.discretisation.n_volumes
         return split_unit_constants(unit, theta, layout(n), controller, condenser_fan="indoor")
 
-    def initial_state(self, c: np.void, n_volumes: int, inputs: np.ndarray, tables) -> np.ndarray:
+    def initial_state(
+        self, c: np.ndarray, n_volumes: int, inputs: np.ndarray, tables
+    ) -> np.ndarray:
         """Initialisation by M0 alone: condensing 20 K above the indoor air, evaporating 8 K
         below the outdoor air, the fill level of :func:`filled_state` found by bisection."""
         p_c = p_sat_from_T(tables, inputs[3] + 20.0)

@@ -19,7 +19,7 @@ from pymc_vcc.physics.components.fan import air_capacity_rate, fan_operating_poi
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume
 from pymc_vcc.physics.cycles.base import StateLayout
 from pymc_vcc.physics.parameters import TABLE_III
-from pymc_vcc.physics.records import make_record
+from pymc_vcc.physics.records import record_array
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import HeatExchangerGeometry, Unit
@@ -103,9 +103,10 @@ def split_unit_constants(
     layout: StateLayout,
     controller: bool | None,
     condenser_fan: Literal["outdoor", "indoor"],
-) -> np.void:
-    """The constants record of a split unit; ``condenser_fan`` says which fan (and Table III
-    fan parameters, ``FO_*`` or ``FI_*``) serves the condenser, the other the evaporator."""
+) -> np.ndarray:
+    """The constants record (a one-element structured array) of a split unit;
+    ``condenser_fan`` says which fan (and Table III fan parameters, ``FO_*`` or ``FI_*``) serves
+    the condenser, the other the evaporator."""
     p = dict(zip((pid for pid, _ in PARAMETERS), np.asarray(theta, dtype=float), strict=True))
     n = unit.discretisation.n_volumes
     fans = {
@@ -152,7 +153,7 @@ def split_unit_constants(
         "valve": {"flow_area": unit.expansion_valve.flow_area, "cf_lev": p["CF_LEV"]},
         "controller": {"kp": kp, "ki": kp * kp / 4.0, "m0": p["M0"]},
     }
-    return make_record(split_unit_dtype(layout), values)
+    return record_array(split_unit_dtype(layout), values)
 
 
 def _coil(
