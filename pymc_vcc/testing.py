@@ -24,7 +24,8 @@ import numpy as np
 import xarray as xr
 from scipy import stats
 
-from pymc_vcc.inference.series import OutputData, Simulator
+from pymc_vcc.inference.series import OutputData
+from pymc_vcc.inference.simulator import Simulator
 
 
 def _grid_moments(axes: list[np.ndarray], log_weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from pymc_vcc.physics.components.compressor import (
+    COMPRESSOR_RECORD,
     compressor,
     compressor_mass_flow,
     protection_speed_factor,
@@ -20,6 +21,7 @@ from pymc_vcc.physics.components.heat_transfer import LIQUID_BLEND, air_side_hea
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.physics.components.smooth import signed_sqrt, smooth_max, smooth_pos, smooth_step
 from pymc_vcc.physics.components.suction_tank import tank_outlet_enthalpy
+from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import (
     entropy,
     h_from_ps,
@@ -90,43 +92,44 @@ def test_compressor_pieces_by_hand():
     assert shaft_power(0.0, 30e3, 0.7, 1.0) == 0.0
 
 
+def _compressor(**changes):
+    """A compressor record of the built-in unit's class, with some fields changed."""
+    values = {
+        "displacement": 11.5e-6,
+        "clearance": 0.04,
+        "exponent": 1.1,
+        "isentropic_efficiency": 0.72,
+        "refrigerant_fraction": 0.92,
+        "shell_ua": 4.0,
+        "cf_vol": 1.0,
+        "cf_pow": 1.0,
+        "cf_pref": 1.0,
+        "cf_shell": 1.0,
+        "T_discharge_max": 430.0,
+        "p_protection_start": 41e5,
+        "p_protection_stop": 46e5,
+    }
+    return make_record(COMPRESSOR_RECORD, values | changes)
+
+
 def test_compressor_energy_balance(tables):
     p_s, p_d = 9.5e5, 27.5e5
     h_s = 4.30e5
     rho_s = state(tables, p_s, h_s)[1]
-    common = (11.5e-6, 0.04, 1.1, 0.72, 0.92, 4.0)
     # no shell loss, all power to the refrigerant: h_d = h_s + Δh_s / η_s
-    m, h_d, power, net = compressor(
-        tables,
-        p_s,
-        h_s,
-        rho_s,
-        p_d,
-        55.0,
-        308.15,
-        *common[:4],
-        1.0,
-        common[5],
-        1.0,
-        1.0,
-        1.0,
-        0.0,
-        430.0,
-    )
+    adiabatic = _compressor(refrigerant_fraction=1.0, cf_shell=0.0)
+    m, h_d, power, net = compressor(tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, adiabatic)
     h_is = h_from_ps(tables, p_d, entropy(tables, p_s, h_s))
     assert h_d - h_s == pytest.approx((h_is - h_s) / 0.72, rel=1e-3)
     assert net == pytest.approx(power, rel=1e-3)  # the smooth thermal cap costs < 0.1 %
     assert 0.015 < m < 0.025
     # shell loss removes heat: discharge enthalpy lower, balance closes
-    m, h_d2, power2, net2 = compressor(
-        tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, *common, 1.0, 1.0, 1.0, 1.0, 430.0
-    )
+    m, h_d2, power2, net2 = compressor(tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, _compressor())
     assert h_d2 < h_d and net2 < 0.92 * power2
     assert m * (h_d2 - h_s) == pytest.approx(net2, rel=1e-9)
     # the thermal limit caps the discharge temperature
-    m, h_d3, _, _ = compressor(
-        tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, *common, 1.0, 2.0, 1.5, 0.3, 340.0
-    )
+    hot = _compressor(cf_pow=2.0, cf_pref=1.5, cf_shell=0.3, T_discharge_max=340.0)
+    m, h_d3, _, _ = compressor(tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, hot)
     assert state(tables, p_d, h_d3)[0] < 340.0 < state(tables, p_d, h_d)[0]
 
 

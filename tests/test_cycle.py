@@ -1,111 +1,142 @@
-"""The cycle right-hand side: state layout, charge initialisation, exact mass balance."""
+"""Every cycle model: state layout, charge initialisation, exact mass balance, Jacobian."""
 
 import numpy as np
 import pytest
 
-from pymc_vcc.physics.cycle import (
-    C_KI,
-    C_KP,
-    C_M0,
-    N_EVAL,
-    build_constants,
-    evaluate,
-    initial_state,
-    jacobian,
-    n_states,
-    state_slices,
-    total_mass,
-)
+from pymc_vcc.physics.cycles import CYCLE_MODELS, cycle_model
+from pymc_vcc.physics.cycles.base import Block, BlockKind, StateLayout
 from pymc_vcc.physics.refrigerant import load_refrigerant
-from pymc_vcc.physics.unit import load_unit
+from pymc_vcc.physics.unit import HEAT_PUMP_UNIT, load_unit
 
-U_RATED = np.array([0.40, 55.0, 308.15, 300.15])
+# (unit file, inputs at which each is checked): valve, speed Hz, outdoor K, indoor K
+CASES = {
+    "split-cooling": (None, np.array([0.40, 55.0, 308.15, 300.15])),
+    "heat-pump-heating": (HEAT_PUMP_UNIT, np.array([0.30, 65.0, 281.15, 293.15])),
+}
 
 
-@pytest.fixture(scope="module")
-def setup():
-    unit = load_unit()
+@pytest.fixture(scope="module", params=sorted(CASES))
+def setup(request):
+    path, inputs = CASES[request.param]
+    unit = load_unit(path)
+    model = unit.cycle_model
+    assert model.name == request.param
     tables = load_refrigerant(unit.refrigerant).tables
-    c = build_constants(unit, unit.parameters.nominal)
-    y = initial_state(c, unit.discretisation.n_volumes, 308.15, 300.15, tables)
-    return unit, tables, c, y
+    c = model.constants(unit, unit.parameters.nominal)
+    y = model.initial_state(c, unit.discretisation.n_volumes, inputs, tables)
+    return unit, model, tables, c, y, inputs
 
 
-def test_state_layout_covers_every_index_once():
+def test_every_shipped_cycle_is_tested():
+    assert set(CASES) == set(CYCLE_MODELS)
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_state_layout_covers_every_index_once(name):
+    model = cycle_model(name)
     for n in (3, 10):
-        covered = np.zeros(n_states(n), dtype=int)
-        for where in state_slices(n).values():
-            covered[where] += 1
+        layout = model.layout(n)
+        covered = np.zeros(layout.size, dtype=int)
+        for block in layout.blocks:
+            covered[layout[block.name]] += 1
         assert np.all(covered == 1)
+        assert layout.n_cells == sum(
+            block.size for block in layout.blocks if block.kind is BlockKind.ENTHALPY
+        )
+
+
+def test_layout_zones_and_errors():
+    layout = StateLayout(
+        [
+            Block("p", 1, BlockKind.PRESSURE),
+            Block("h", 3, BlockKind.ENTHALPY),
+            Block("T", 3, BlockKind.TEMPERATURE),
+            Block("q", 1, BlockKind.PRESSURE),
+            Block("g", 2, BlockKind.ENTHALPY),
+        ]
+    )
+    assert layout.zones.tolist() == [[0, 3], [7, 2]]
+    assert layout["T"] == slice(4, 7) and layout.record["g"] == 8
+    with pytest.raises(ValueError, match="must follow its zone's pressure"):
+        StateLayout([Block("T", 2, BlockKind.TEMPERATURE), Block("h", 2, BlockKind.ENTHALPY)])
+    with pytest.raises(ValueError, match="distinct names"):
+        StateLayout([Block("p", 1, BlockKind.PRESSURE), Block("p", 1, BlockKind.PRESSURE)])
+    with pytest.raises(KeyError, match="unknown state block 'x'"):
+        layout.start("x")
+
+
+def test_unknown_cycle_is_a_clear_error():
+    with pytest.raises(ValueError, match="unknown cycle 'chiller'; allowed cycles are"):
+        cycle_model("chiller")
 
 
 @pytest.mark.parametrize("charge", [0.9, 1.3, 2.2])
 def test_initial_state_holds_exactly_m0(setup, charge):
-    unit, tables, _, _ = setup
-    theta = unit.parameters.vector({"M0": charge})
-    c = build_constants(unit, theta)
-    y = initial_state(c, unit.discretisation.n_volumes, 308.15, 300.15, tables)
-    assert total_mass(y, c, tables) == pytest.approx(charge, rel=1e-12)
+    unit, model, tables, _, _, inputs = setup
+    c = model.constants(unit, unit.parameters.vector({"M0": charge}))
+    y = model.initial_state(c, unit.discretisation.n_volumes, inputs, tables)
+    assert model.total_mass(y, c, tables) == pytest.approx(charge, rel=1e-12)
 
 
 def test_charge_that_does_not_fit_is_an_error(setup):
-    unit, tables, _, _ = setup
-    c = build_constants(unit, unit.parameters.vector({"M0": 9.0}))
+    unit, model, tables, _, _, inputs = setup
+    c = model.constants(unit, unit.parameters.vector({"M0": 9.0}))
     with pytest.raises(ValueError, match="cannot be placed"):
-        initial_state(c, unit.discretisation.n_volumes, 308.15, 300.15, tables)
+        model.initial_state(c, unit.discretisation.n_volumes, inputs, tables)
 
 
 def test_mass_changes_only_by_the_controller_source(setup):
-    _, tables, c, y = setup
+    _, model, tables, c, y, inputs = setup
     c = c.copy()
-    c[C_M0] *= 1.01  # a mass error, so the source is non-zero
+    c[0]["controller"]["m0"] *= 1.01  # a mass error, so the source is non-zero
     y = y.copy()
     y[-1] = 0.3  # and an integral term
     dydt = np.empty(y.size)
-    out = np.empty(N_EVAL)
-    assert evaluate(y, U_RATED, c, tables, dydt, out)
-    source = out[15]
+    out = np.empty(model.n_eval)
+    assert model.evaluate(y, inputs, c, tables, dydt, out)
+    names = [*model.output_info, *model.diagnostic_info]
+    source = out[names.index("mdot_src")]
     assert abs(source) > 1e-5
     eps = 1e-3
-    rate = (total_mass(y + eps * dydt, c, tables) - total_mass(y - eps * dydt, c, tables)) / (
-        2 * eps
-    )
+    rate = (
+        model.total_mass(y + eps * dydt, c, tables) - model.total_mass(y - eps * dydt, c, tables)
+    ) / (2 * eps)
     # exact up to the finite difference: a millionth of the compressor flow
-    assert rate == pytest.approx(source, abs=1e-6 * out[8])
+    assert rate == pytest.approx(source, abs=1e-6 * out[names.index("MDOT")])
 
 
 def test_controller_switch_and_gains(setup):
-    unit, _, _, _ = setup
-    on = build_constants(unit, unit.parameters.nominal)
-    off = build_constants(unit, unit.parameters.nominal, controller=False)
-    assert on[C_KP] == unit.controller.kp and on[C_KI] == pytest.approx(on[C_KP] ** 2 / 4)
-    assert off[C_KP] == 0.0 and off[C_KI] == 0.0
+    unit, model, _, _, _, _ = setup
+    on = model.constants(unit, unit.parameters.nominal)[0]["controller"]
+    off = model.constants(unit, unit.parameters.nominal, controller=False)[0]["controller"]
+    assert on["kp"] == unit.controller.kp and on["ki"] == pytest.approx(on["kp"] ** 2 / 4)
+    assert off["kp"] == 0.0 and off["ki"] == 0.0
 
 
 def test_jacobian_matches_central_differences(setup):
-    _, tables, c, y = setup
+    _, model, tables, c, y, inputs = setup
     dydt = np.empty(y.size)
-    out = np.empty(N_EVAL)
-    evaluate(y, U_RATED, c, tables, dydt, out)
-    jac = jacobian(y, U_RATED, c, tables, dydt.copy())
+    out = np.empty(model.n_eval)
+    model.evaluate(y, inputs, c, tables, dydt, out)
+    jac = model.jacobian(y, inputs, c, tables, dydt.copy())
     for j in (0, 3, 12, 22, 30, y.size - 1):
         step = 1e-6 * max(abs(y[j]), 1.0)
         up, down = np.empty(y.size), np.empty(y.size)
         shifted = y.copy()
         shifted[j] += step
-        evaluate(shifted, U_RATED, c, tables, up, out)
+        model.evaluate(shifted, inputs, c, tables, up, out)
         shifted[j] -= 2 * step
-        evaluate(shifted, U_RATED, c, tables, down, out)
+        model.evaluate(shifted, inputs, c, tables, down, out)
         central = (up - down) / (2 * step)
         scale = np.abs(central).max() + 1e-12
         assert np.max(np.abs(jac[:, j] - central)) < 1e-3 * scale
 
 
 def test_out_of_range_state_is_flagged_not_raised(setup):
-    _, tables, c, y = setup
+    _, model, tables, c, y, inputs = setup
     y = y.copy()
     y[0] = 80e5  # above the critical pressure
     dydt = np.empty(y.size)
-    out = np.empty(N_EVAL)
-    assert not evaluate(y, U_RATED, c, tables, dydt, out)
+    out = np.empty(model.n_eval)
+    assert not model.evaluate(y, inputs, c, tables, dydt, out)
     assert np.isnan(out).all()

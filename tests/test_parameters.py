@@ -28,8 +28,6 @@ def test_builtin_bounds_are_those_of_table_iii():
         ({"low": 2.0, "high": 1.0}, "low < high"),
         ({"low": 1.0, "high": 1.0}, "low < high"),
         ({"nominal": 5.0}, "outside its bounds"),
-        ({"unit": "g"}, "expected 'kg'"),
-        ({"id": "M_TOTAL"}, "unknown parameter id"),
         ({"nominal": float("nan")}, "finite"),
     ],
 )
@@ -38,6 +36,18 @@ def test_bad_specs_are_clear_errors(changes, message):
     values |= {"nominal": 1.3} | changes
     with pytest.raises(ValueError, match=message):
         ParameterSpec(**values)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [({"unit": "g"}, "expected 'kg'"), ({"id": "M_TOTAL"}, "unknown parameter id")],
+)
+def test_specs_are_checked_against_the_cycle_models_ids(changes, message):
+    specs = {spec.id: spec for spec in load_unit().parameters}
+    values = {"id": "M0", "name": "charge", "unit": "kg", "low": 0.9, "high": 2.2, "nominal": 1.3}
+    specs["M0"] = ParameterSpec(**(values | changes))
+    with pytest.raises(ValueError, match=message):
+        parameter_table(specs.values())
 
 
 def test_missing_parameter_is_named():

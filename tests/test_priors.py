@@ -147,6 +147,7 @@ def test_prior_bounds_outside_the_units_are_refused_by_every_sampler():
     from pymc_vcc.inference.pymc.model import add_simulator
     from pymc_vcc.inference.rejection import abc_rejection
     from pymc_vcc.inference.sensitivity import sobol_indices
+    from pymc_vcc.inference.simulator import check_simulator
     from pymc_vcc.physics.simulate import VCCSimulator
 
     simulator = VCCSimulator(parameters=["M0"], outputs=["PD"])
@@ -160,5 +161,5 @@ def test_prior_bounds_outside_the_units_are_refused_by_every_sampler():
     with pytest.raises(ValueError, match=message):
         sobol_indices(simulator, wide, ["PD"], executor="serial")
     extrapolating = VCCSimulator(parameters=["M0"], outputs=["PD"], allow_outside_unit_bounds=True)
-    check_prior_support(extrapolating, wide)  # asked for explicitly: allowed
-    check_prior_support(simulator, {"M0": (1.0, 2.0)})
+    check_prior_support(check_simulator(extrapolating).support, wide)  # asked for: allowed
+    check_prior_support(check_simulator(simulator).support, {"M0": (1.0, 2.0)})

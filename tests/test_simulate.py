@@ -6,7 +6,8 @@ import pickle
 import numpy as np
 import pytest
 
-from pymc_vcc.physics.cycle import OUTPUT_IDS
+from pymc_vcc.physics.cycles import OUTPUT_IDS
+from pymc_vcc.physics.failures import FailureKind
 from pymc_vcc.physics.inputs import builtin_inputs, constant_inputs
 from pymc_vcc.physics.simulate import VCCSimulator, operating_point, simulate
 from pymc_vcc.physics.unit import load_unit
@@ -120,12 +121,15 @@ def test_failures_are_flagged_not_raised(unit):
     )
     slow = simulate(unit, None, inputs, max_wall_time=1e-3)
     assert slow.attrs["status"] == "failed" and "wall-clock" in slow.attrs["failure_reason"]
+    assert slow.attrs["failure_kind"] == FailureKind.WALL_CLOCK
     assert slow.sizes["time"] == 601 and np.isnan(slow.PD.values[-1])
     too_much = simulate(unit, {"M0": 9.0}, inputs)
     assert too_much.attrs["status"] == "failed"
     assert "initial state" in too_much.attrs["failure_reason"]
+    assert too_much.attrs["failure_kind"] == FailureKind.INITIAL_STATE
     degenerate = simulate(unit, {"CF_VOL": 0.0, "L_COND": 0.0}, inputs)  # zero flow, no volume
     assert degenerate.attrs["status"] == "failed" and degenerate.attrs["failure_reason"]
+    assert degenerate.attrs["failure_kind"] in set(FailureKind)
     with pytest.raises(ValueError, match="unknown parameter id"):
         simulate(unit, {"charge": 1.0}, inputs)
 

@@ -56,6 +56,11 @@ def _mutated(mutate):
         (lambda d: d["parameters"].pop("L_VAP"), "L_VAP"),
         (lambda d: d["parameters"].update(X1={}), "X1"),
         (lambda d: d["unit"].update(refrigerant="R999"), "R999"),
+        (
+            lambda d: d["unit"].update(cycle="chiller"),
+            r"\[unit\] cycle: unknown cycle 'chiller'; allowed cycles are",
+        ),
+        (lambda d: d["unit"].update(cycle=3), r"\[unit\] cycle: expected a name, got 3"),
     ],
 )
 def test_bad_unit_descriptions_are_clear_errors(mutate, message):
@@ -77,3 +82,20 @@ def test_with_changes_validates():
         unit.with_changes(discretisation={"n_volumes": -2})
     with pytest.raises(ValueError, match="unknown section"):
         unit.with_changes(nonsense={"a": 1})
+
+
+def test_the_worked_example_of_models_readme_loads_and_runs():
+    from pathlib import Path
+
+    from pymc_vcc.physics.simulate import operating_point
+
+    unit = load_unit(Path(__file__).parents[1] / "models" / "r32_heat_pump_3kw.toml")
+    assert (unit.cycle, unit.refrigerant, unit.condenser.n_paths) == ("heat-pump-heating", "R32", 3)
+    point = operating_point(unit, T_ambient=275.15)
+    assert point["status"] == "ok" and 2000.0 < point["capacity"] < 4500.0
+
+
+def test_a_unit_without_a_cycle_runs_the_split_cooling_cycle():
+    data = unit_to_dict(load_unit())
+    del data["unit"]["cycle"]
+    assert unit_from_dict(data).cycle == "split-cooling"

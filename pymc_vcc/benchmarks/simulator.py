@@ -3,7 +3,7 @@
 * ``sim_seconds_median``: one 1060 s simulation of the built-in profile at nominal parameters,
   one process, median after a warm-up run;
 * ``sims_per_second`` and ``failure_rate``: 1060 s simulations of uniform draws from the Table
-  III box on all cores (a process pool), with the failure reasons counted.
+  III box on all cores (a process pool), with the failure kinds counted.
 """
 
 from __future__ import annotations
@@ -29,18 +29,10 @@ def _init_worker() -> None:
     _simulator = VCCSimulator(t_window=T_WINDOW)
 
 
-def _run_draw(theta: dict[str, float]) -> tuple[str, str]:
+def _run_draw(theta: dict[str, float]) -> str:
+    """The draw's failure kind (:class:`~pymc_vcc.physics.failures.FailureKind`), "" if ok."""
     assert _simulator is not None
-    attrs = _simulator(theta, None).attrs
-    return attrs["status"], attrs["failure_reason"]
-
-
-def _reason_kind(reason: str) -> str:
-    """A failure reason without its times and counts, so equal causes group together."""
-    head = reason.split(" at t = ")[0]
-    if ": " in reason:
-        head += ": " + reason.rsplit(": ", 1)[-1].split(" (")[0]
-    return head
+    return _simulator(theta, None).attrs["failure_kind"]
 
 
 def run(quick: bool) -> dict[str, float | int | str]:
@@ -63,7 +55,7 @@ def run(quick: bool) -> dict[str, float | int | str]:
     with context.Pool(workers, initializer=_init_worker) as pool:
         outcomes = pool.map(_run_draw, draws, chunksize=1)
     elapsed = time.perf_counter() - start
-    reasons = Counter(_reason_kind(reason) for status, reason in outcomes if status != "ok")
+    reasons = Counter(kind for kind in outcomes if kind)
     failures = sum(reasons.values())
     return {
         "sim_seconds_median": median(times),

@@ -29,7 +29,8 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.worker_pool import TIME_LIMIT, WORKER_CRASH, WorkerCrash
-from pymc_vcc.inference.series import InvalidOutputError, ObservedData, Simulator, extract_outputs
+from pymc_vcc.inference.series import InvalidOutputError, ObservedData, extract_outputs
+from pymc_vcc.inference.simulator import Simulator
 
 OK = "ok"
 FAILURE_KINDS: tuple[str, ...] = (

@@ -27,7 +27,8 @@ import xarray as xr
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
 from pymc_vcc.execution.outcomes import run_simulation
 from pymc_vcc.inference.noise import add_output_noise, noise_parameter
-from pymc_vcc.inference.series import ObservedData, OutputData, Simulator, prepare_observed
+from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
+from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator
 
 BANDS = ("lower", "median", "upper")
 
@@ -79,9 +80,9 @@ class PredictiveRun:
 
 
 def _layout(
-    simulator: Simulator, outputs: Sequence[str] | None, reference: OutputData | None
+    info: SimulatorInfo, outputs: Sequence[str] | None, reference: OutputData | None
 ) -> ObservedData:
-    names = getattr(simulator, "output_names", None)
+    names = info.output_names
     if reference is not None:
         return prepare_observed(reference, outputs, names)
     if names is None:
@@ -154,8 +155,9 @@ def sample_posterior_predictive(
     if not 0.0 < interval < 1.0:
         raise ValueError(f"interval must lie in (0, 1), got {interval}")
     posterior = _selected_draws(idata["posterior"].to_dataset(), max_draws)
+    info = check_simulator(simulator)
     if parameters is None:
-        known = getattr(simulator, "parameter_names", None)
+        known = info.parameter_names
         if known is None:
             raise ValueError("the simulator has no parameter_names; pass parameters=")
         parameters = [name for name in posterior.data_vars if name in known]
@@ -165,7 +167,7 @@ def sample_posterior_predictive(
             f"posterior lacks parameter(s) {missing or parameters}; it has "
             f"{list(posterior.data_vars)}"
         )
-    layout = _layout(simulator, outputs, reference)
+    layout = _layout(info, outputs, reference)
     noise_names = [noise_parameter(name) for name in layout.names]
     n_chains, n_draws = posterior.sizes["chain"], posterior.sizes["draw"]
     values = {name: posterior[name].values.reshape(-1) for name in parameters}

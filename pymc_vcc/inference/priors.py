@@ -47,13 +47,13 @@ def validate_bounds(bounds: Bounds) -> dict[str, tuple[float, float]]:
     return checked
 
 
-def check_prior_support(simulator: object, bounds: Bounds) -> None:
-    """Refuse prior bounds that reach outside the simulator's ``parameter_bounds``, if it has any.
+def check_prior_support(allowed: Bounds | None, bounds: Bounds) -> None:
+    """Refuse prior bounds that reach outside a simulator's support (``parameter_bounds``, read
+    by :func:`pymc_vcc.inference.simulator.check_simulator`); None allows any bounds.
 
     Raises:
         ValueError: naming the parameter, the prior's bounds and the allowed range.
     """
-    allowed = getattr(simulator, "parameter_bounds", None)
     if allowed is None:
         return
     for name, (low, high) in bounds.items():

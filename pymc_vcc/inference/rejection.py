@@ -36,7 +36,8 @@ from pymc_vcc.execution.store import SimulationRecord, SimulationStore
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import NOISE_PREFIX, add_output_noise, noise_parameter, with_noise
 from pymc_vcc.inference.priors import Prior, check_prior_support
-from pymc_vcc.inference.series import ObservedData, OutputData, Simulator, prepare_observed
+from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
+from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator
 
 PILOT, MAIN = 0, 1
 PHASE_NAMES = ("pilot", "main")
@@ -201,9 +202,9 @@ def _check_settings(
 
 
 def _prepare_observed(
-    simulator: Simulator, observed: OutputData, outputs: Sequence[str] | None
+    info: SimulatorInfo, observed: OutputData, outputs: Sequence[str] | None
 ) -> ObservedData:
-    simulated = getattr(simulator, "output_names", None)
+    simulated = info.output_names
     data = prepare_observed(observed, outputs, output_names=simulated)
     if simulated is not None:
         foreign = [name for name in data.names if name not in simulated]
@@ -215,10 +216,10 @@ def _prepare_observed(
     return data
 
 
-def _model_names(simulator: Simulator, prior: Prior) -> tuple[str, ...]:
-    check_prior_support(simulator, prior.bounds)
+def _model_names(info: SimulatorInfo, prior: Prior) -> tuple[str, ...]:
+    check_prior_support(info.support, prior.bounds)
     model = tuple(name for name in prior.names if not name.startswith(NOISE_PREFIX))
-    expected = getattr(simulator, "parameter_names", None)
+    expected = info.parameter_names
     if expected is not None and set(expected) != set(model):
         missing = sorted(set(expected) - set(model))
         extra = sorted(set(model) - set(expected))
@@ -374,9 +375,10 @@ def abc_rejection(
     _check_settings(n_pilot, quantile, n_main, n_desired, max_failure_rate)
     if time_limit is not None and not time_limit > 0:
         raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
-    data = _prepare_observed(simulator, observed, outputs)
+    info = check_simulator(simulator)
+    data = _prepare_observed(info, observed, outputs)
     full_prior = with_noise(prior, noise, data.names)
-    model_names = _model_names(simulator, full_prior)
+    model_names = _model_names(info, full_prior)
     entropy, spawn_key = split_seed(seed)
     settings = {
         "sampler": "abc_rejection",

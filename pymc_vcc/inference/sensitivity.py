@@ -28,7 +28,8 @@ from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, ex
 from pymc_vcc.execution.outcomes import crash_outcome, run_simulation
 from pymc_vcc.execution.store import ResultRecord, ResultStore
 from pymc_vcc.inference.priors import check_prior_support, validate_bounds
-from pymc_vcc.inference.series import OutputData, Simulator, prepare_observed
+from pymc_vcc.inference.series import OutputData, prepare_observed
+from pymc_vcc.inference.simulator import Simulator, check_simulator
 
 
 @dataclass(frozen=True)
@@ -138,7 +139,7 @@ def sobol_indices(
         (parameter, output); attrs count simulations, failures and dropped base samples.
     """
     checked = validate_bounds(bounds)
-    check_prior_support(simulator, checked)
+    check_prior_support(check_simulator(simulator).support, checked)
     names = tuple(checked)
     outputs = tuple(outputs)
     if not outputs:

@@ -22,7 +22,8 @@ from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import with_noise
 from pymc_vcc.inference.priors import GMMPrior, Prior, prior_from_dataset
 from pymc_vcc.inference.rejection import abc_rejection, split_seed
-from pymc_vcc.inference.series import OutputData, Simulator, prepare_observed
+from pymc_vcc.inference.series import OutputData, prepare_observed
+from pymc_vcc.inference.simulator import Simulator, check_simulator
 
 PRIOR_GROUP = "prior_model"
 
@@ -160,7 +161,7 @@ def sequential_calibration(
     with executor_scope(executor, n_workers) as pool:
         for k, (stage_simulator, observed) in enumerate(zip(simulators, datasets, strict=True)):
             if k == 0 or keep_uniform:
-                simulated = getattr(stage_simulator, "output_names", None)
+                simulated = check_simulator(stage_simulator).output_names
                 used = prepare_observed(observed, outputs, output_names=simulated).names
                 prior = with_noise(first_prior, noise, used)
             else:

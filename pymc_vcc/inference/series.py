@@ -8,7 +8,7 @@ any simulation runs.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -17,16 +17,6 @@ import xarray as xr
 
 OutputData = xr.Dataset | np.ndarray
 """What a simulator returns and what observed data may be: a Dataset or an (outputs, time) array."""
-
-Simulator = Callable[[Mapping[str, float], np.random.Generator], OutputData]
-"""``simulator(theta, rng) -> outputs``: parameters by name (SI units), a random generator.
-
-It must be picklable (a module-level function, a ``functools.partial`` of one, or an instance of
-a module-level class) to run in other processes. Optional attributes ``parameter_names`` and
-``output_names`` (sequences of str) let samplers check priors and observed data before running;
-``parameter_bounds`` (name -> (low, high), SI) is where the simulator is valid, and samplers
-refuse a prior that reaches outside it (:func:`pymc_vcc.inference.priors.check_prior_support`).
-"""
 
 
 class InvalidOutputError(ValueError):

@@ -35,7 +35,7 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.io.plausibility import check_plausible
-from pymc_vcc.physics.cycle import OUTPUT_IDS, OUTPUT_INFO
+from pymc_vcc.physics.cycles import OUTPUT_IDS, OUTPUT_INFO
 from pymc_vcc.physics.inputs import INPUT_IDS, make_inputs
 
 EXAMPLE_LOG = "example_log.csv"
@@ -380,7 +380,7 @@ def load_measurements(
     Args:
         path: CSV file (``,``, ``;`` or tab separated) with a header row.
         columns: file column -> id, one for each of the four inputs (:data:`INPUT_IDS`) and at
-            least one output (:data:`~pymc_vcc.physics.cycle.OUTPUT_IDS`); other file columns are
+            least one output (:data:`~pymc_vcc.physics.cycles.OUTPUT_IDS`); other file columns are
             ignored.
         units: file column -> unit (see :func:`unit_converter`); a column missing here may carry
             its unit in its header, ``"name [unit]"``.

@@ -15,9 +15,14 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+from numpy.typing import ArrayLike
 
 BUILTIN_PROFILE = "fig4_steps.csv"
 """File name of the built-in 2120 s step profile inside ``pymc_vcc/data``."""
+
+WINTER_PROFILE = "winter_day_steps.csv"
+"""A winter day for the heat pump in ``pymc_vcc/data``: 2400 s of steps, outdoor -7 to 8 °C,
+indoor 20 to 22 °C, the compressor faster when it is colder."""
 
 
 @dataclass(frozen=True)
@@ -44,7 +49,7 @@ INPUT_IDS: tuple[str, ...] = tuple(spec.id for spec in INPUTS)
 _CELSIUS_OFFSET = 273.15
 
 
-def make_inputs(time: np.ndarray, **values: np.ndarray) -> xr.Dataset:
+def make_inputs(time: ArrayLike, **values: ArrayLike) -> xr.Dataset:
     """Build and validate an input Dataset from arrays in SI units (one value per time)."""
     time = np.asarray(time, dtype=float)
     data_vars = {}
@@ -86,7 +91,7 @@ def validate_inputs(inputs: xr.Dataset) -> None:
     missing = [pid for pid in INPUT_IDS if pid not in inputs.data_vars]
     if missing:
         raise ValueError(f"inputs: missing variable(s) {missing}; required are {INPUT_IDS}")
-    unknown = sorted(set(inputs.data_vars) - set(INPUT_IDS))
+    unknown = sorted(str(name) for name in set(inputs.data_vars) - set(INPUT_IDS))
     if unknown:
         raise ValueError(f"inputs: unknown variable(s) {unknown}; allowed are {INPUT_IDS}")
     for spec in INPUTS:
@@ -162,10 +167,14 @@ def _inputs_from_csv_text(text: str, source: str) -> xr.Dataset:
     return make_inputs(table[:, 0], **values)
 
 
-def builtin_inputs() -> xr.Dataset:
-    """The built-in 2120 s step profile (the paper's Fig. 4 kind: every input stepped)."""
-    text = resources.files("pymc_vcc").joinpath("data", BUILTIN_PROFILE).read_text()
-    return _inputs_from_csv_text(text, BUILTIN_PROFILE)
+def builtin_inputs(name: str = BUILTIN_PROFILE) -> xr.Dataset:
+    """A shipped profile: by default the 2120 s step profile (the paper's Fig. 4 kind: every
+    input stepped); :data:`WINTER_PROFILE` is the heat pump's winter day."""
+    shipped = (BUILTIN_PROFILE, WINTER_PROFILE)
+    if name not in shipped:
+        raise ValueError(f"unknown shipped profile {name!r}; shipped are {list(shipped)}")
+    text = resources.files("pymc_vcc").joinpath("data", name).read_text()
+    return _inputs_from_csv_text(text, name)
 
 
 def constant_inputs(

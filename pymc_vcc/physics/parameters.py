@@ -1,9 +1,9 @@
-"""The 26 calibration parameters of the paper's Table III: ids, long names, units, bounds.
+"""Calibration parameters: ids, long names, units, bounds, and the paper's Table III.
 
-The physics reads parameters by their stable short id (``M0``, ``CF_VOL``, ...). A unit
-description (``models/*.toml``) gives each id its long name, unit, bounds and nominal value; this
-module holds the canonical list of ids and the units the physics expects, and turns user
-supplied parameter mappings into validated vectors.
+The physics reads parameters by their stable short id (``M0``, ``CF_VOL``, ...). Each cycle
+model declares the ids and units it expects (the split unit's are the 26 of Table III); a unit
+description (``models/*.toml``) gives each id its long name, unit, bounds and nominal value, and
+this module checks them against the model and turns user parameter mappings into vectors.
 """
 
 from __future__ import annotations
@@ -46,7 +46,8 @@ TABLE_III: tuple[tuple[str, str], ...] = (
 PARAMETER_IDS: tuple[str, ...] = tuple(pid for pid, _ in TABLE_III)
 """Parameter ids in Table III order; the index of an id is its position in parameter vectors."""
 
-EXPECTED_UNITS: dict[str, str] = dict(TABLE_III)
+ParameterIds = tuple[tuple[str, str], ...]
+"""(id, unit) of the parameters a cycle model expects, in vector order."""
 
 
 @dataclass(frozen=True)
@@ -61,15 +62,6 @@ class ParameterSpec:
     nominal: float
 
     def __post_init__(self) -> None:
-        if self.id not in EXPECTED_UNITS:
-            raise ValueError(
-                f"unknown parameter id {self.id!r}; allowed ids are {list(PARAMETER_IDS)}"
-            )
-        if self.unit != EXPECTED_UNITS[self.id]:
-            raise ValueError(
-                f"parameter {self.id}: unit {self.unit!r} is not the expected "
-                f"{EXPECTED_UNITS[self.id]!r}"
-            )
         for field in ("low", "high", "nominal"):
             value = getattr(self, field)
             if not np.isfinite(value):
@@ -87,24 +79,31 @@ class ParameterSpec:
 
 @dataclass(frozen=True)
 class ParameterTable:
-    """The ordered set of all 26 parameter specs of a unit."""
+    """The ordered parameter specs of a unit: exactly the ids and units of ``expected`` (its
+    cycle model's parameters; Table III by default), in that order."""
 
     specs: tuple[ParameterSpec, ...]
+    expected: ParameterIds = TABLE_III
 
     def __post_init__(self) -> None:
         ids = tuple(spec.id for spec in self.specs)
-        if ids != PARAMETER_IDS:
-            missing = [pid for pid in PARAMETER_IDS if pid not in ids]
+        if ids != self.ids:
+            missing = [pid for pid in self.ids if pid not in ids]
             raise ValueError(
-                f"parameters must be exactly {list(PARAMETER_IDS)} in this order "
+                f"parameters must be exactly {list(self.ids)} in this order "
                 f"(missing: {missing}); use parameter_table() to sort them"
             )
+        for spec, (pid, unit) in zip(self.specs, self.expected, strict=True):
+            if spec.unit != unit:
+                raise ValueError(
+                    f"parameter {pid}: unit {spec.unit!r} is not the expected {unit!r}"
+                )
 
     def __getitem__(self, pid: str) -> ParameterSpec:
         for spec in self.specs:
             if spec.id == pid:
                 return spec
-        raise KeyError(f"unknown parameter id {pid!r}; allowed ids are {list(PARAMETER_IDS)}")
+        raise KeyError(f"unknown parameter id {pid!r}; allowed ids are {list(self.ids)}")
 
     def __iter__(self) -> Iterator[ParameterSpec]:
         return iter(self.specs)
@@ -114,22 +113,22 @@ class ParameterTable:
 
     @property
     def ids(self) -> tuple[str, ...]:
-        """Parameter ids in Table III order."""
-        return PARAMETER_IDS
+        """Parameter ids in vector order."""
+        return tuple(pid for pid, _ in self.expected)
 
     @property
     def lows(self) -> np.ndarray:
-        """Lower bounds in Table III order."""
+        """Lower bounds in vector order."""
         return np.array([spec.low for spec in self.specs])
 
     @property
     def highs(self) -> np.ndarray:
-        """Upper bounds in Table III order."""
+        """Upper bounds in vector order."""
         return np.array([spec.high for spec in self.specs])
 
     @property
     def nominal(self) -> np.ndarray:
-        """Nominal values in Table III order."""
+        """Nominal values in vector order."""
         return np.array([spec.nominal for spec in self.specs])
 
     def vector(
@@ -143,11 +142,10 @@ class ParameterTable:
         values = self.nominal
         if not theta:
             return values
+        ids = self.ids
         for pid, value in theta.items():
-            if pid not in EXPECTED_UNITS:
-                raise ValueError(
-                    f"unknown parameter id {pid!r}; allowed ids are {list(PARAMETER_IDS)}"
-                )
+            if pid not in ids:
+                raise ValueError(f"unknown parameter id {pid!r}; allowed ids are {list(ids)}")
             value = float(value)
             if not np.isfinite(value):
                 raise ValueError(f"parameter {pid}: value must be finite, got {value!r}")
@@ -157,19 +155,26 @@ class ParameterTable:
                     f"parameter {pid}: value {value} lies outside its bounds "
                     f"[{spec.low}, {spec.high}]"
                 )
-            values[PARAMETER_IDS.index(pid)] = value
+            values[ids.index(pid)] = value
         return values
 
     def sample_uniform(self, n: int, rng: np.random.Generator) -> list[dict[str, float]]:
         """``n`` parameter sets drawn uniformly from the bounds box."""
         draws = rng.uniform(self.lows, self.highs, size=(n, len(self.specs)))
-        return [dict(zip(PARAMETER_IDS, map(float, row), strict=True)) for row in draws]
+        return [dict(zip(self.ids, map(float, row), strict=True)) for row in draws]
 
 
-def parameter_table(entries: Iterable[ParameterSpec]) -> ParameterTable:
-    """Build a :class:`ParameterTable`, sorted into Table III order."""
+def parameter_table(
+    entries: Iterable[ParameterSpec], expected: ParameterIds = TABLE_III
+) -> ParameterTable:
+    """Build a :class:`ParameterTable` of the ``expected`` ids (default: Table III), sorted into
+    their order; unknown and missing ids are errors naming them."""
     specs = {spec.id: spec for spec in entries}
-    missing = [pid for pid in PARAMETER_IDS if pid not in specs]
+    ids = [pid for pid, _ in expected]
+    unknown = [pid for pid in specs if pid not in ids]
+    if unknown:
+        raise ValueError(f"unknown parameter id(s) {unknown}; allowed ids are {ids}")
+    missing = [pid for pid in ids if pid not in specs]
     if missing:
         raise ValueError(f"parameters missing from the unit description: {missing}")
-    return ParameterTable(tuple(specs[pid] for pid in PARAMETER_IDS))
+    return ParameterTable(tuple(specs[pid] for pid in ids), expected)

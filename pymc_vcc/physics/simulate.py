@@ -1,9 +1,11 @@
-"""Simulation driver: scipy's Radau, step by step, restarted at every input step.
+"""Simulation driver: any cycle model, scipy's Radau step by step, restarted at every input step.
 
-:func:`simulate` never raises for a run that goes wrong: it returns the output Dataset flagged
-``status = "failed"`` with a ``failure_reason`` (solver failure, non-finite state, property out of
-range, wall-clock limit, charge that does not fit), outputs NaN from the failure on. Bad
-*arguments* (unknown parameter ids, invalid inputs) do raise, before anything runs.
+The driver knows no topology: the unit names its cycle model (:mod:`pymc_vcc.physics.cycles`),
+which supplies the state layout, tolerances, initial state, right-hand side, Jacobian and
+outputs. :func:`simulate` never raises for a run that goes wrong: it returns the output Dataset
+flagged ``status = "failed"`` with a ``failure_kind`` (:class:`FailureKind`) and a
+``failure_reason`` (the detail), outputs NaN from the failure on. Bad *arguments* (unknown
+parameter ids, invalid inputs) do raise, before anything runs.
 """
 
 from __future__ import annotations
@@ -18,20 +20,8 @@ from scipy.integrate import Radau
 from scipy.linalg import get_lapack_funcs
 from threadpoolctl import ThreadpoolController
 
-from pymc_vcc.physics.cycle import (
-    C_M0,
-    DIAGNOSTIC_INFO,
-    N_EVAL,
-    OUTPUT_IDS,
-    OUTPUT_INFO,
-    build_constants,
-    evaluate,
-    initial_state,
-    jacobian,
-    n_states,
-    outputs_along,
-    state_slices,
-)
+from pymc_vcc.physics.cycles.base import CycleModel
+from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.inputs import (
     INPUT_IDS,
     builtin_inputs,
@@ -65,22 +55,8 @@ threading (five times slower at 126 states on a busy 2-core machine), and sample
 simulation per core anyway."""
 
 
-def _tolerances(unit: Unit) -> np.ndarray:
-    n = unit.discretisation.n_volumes
-    s = state_slices(n)
-    solver = unit.solver
-    atol = np.empty(n_states(n))
-    atol[[s["p_cond"], s["p_evap"]]] = solver.atol_pressure
-    for key in ("h_cond", "h_liquid_line", "h_evap", "h_vapor_line", "h_tank"):
-        atol[s[key]] = solver.atol_enthalpy
-    atol[s["Tw_cond"]] = solver.atol_temperature
-    atol[s["Tw_evap"]] = solver.atol_temperature
-    atol[s["z"]] = 1e-4
-    return atol
-
-
-def _empty_result(times: np.ndarray, diagnostics: bool) -> dict[str, np.ndarray]:
-    names = list(OUTPUT_IDS) + (list(DIAGNOSTIC_INFO) if diagnostics else [])
+def _empty_result(model: CycleModel, times: np.ndarray, diagnostics: bool) -> dict:
+    names = list(model.output_info) + (list(model.diagnostic_info) if diagnostics else [])
     return {name: np.full(times.size, np.nan) for name in names}
 
 
@@ -102,7 +78,8 @@ def simulate(
     unit
         Unit description (default: the built-in 3.5 kW R410A split).
     params
-        Table III parameter values by id; missing ids take their nominal value.
+        Parameter values by id (the unit's table; Table III for the split unit); missing ids
+        take their nominal value.
     inputs
         Input profile (default: the built-in 2120 s step profile), see
         :mod:`pymc_vcc.physics.inputs`.
@@ -113,7 +90,8 @@ def simulate(
     controller
         Switch the virtual PI charge controller on/off (default: the unit's setting).
     diagnostics
-        Also return heats, powers, total mass and controller source (see ``DIAGNOSTIC_INFO``).
+        Also return heats, powers, total mass and controller source (the cycle model's
+        ``diagnostic_info``).
     max_wall_time
         Wall-clock limit in s (default: the unit's ``solver.max_wall_time``).
 
@@ -141,44 +119,48 @@ def simulate(
     edges, held = input_segments(inputs)
     times = np.arange(0.0, edges[-1] + 1e-9 * edges[-1], dt)
     tables = _fluid(unit.refrigerant).tables
-    c = build_constants(unit, theta, controller)
+    model = unit.cycle_model
     n = unit.discretisation.n_volumes
-    atol = _tolerances(unit)
+    layout = model.layout(n)
+    c = model.constants(unit, theta, controller)
+    atol = layout.tolerances(unit.solver)
 
-    states = np.full((times.size, n_states(n)), np.nan)
+    states = np.full((times.size, layout.size), np.nan)
     controls = np.empty((times.size, len(INPUT_IDS)))
     segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
     controls[:] = held[segment_of]
     stats = {"n_rhs": 0, "n_jac": 0, "n_steps": 0, "bad_rhs": 0}
-    reason = ""
+    failure: Failure | None = None
     try:
-        y = initial_state(c, n, held[0][2], held[0][3], tables)
+        y = model.initial_state(c, n, held[0], tables)
     except Exception as error:  # any numerical trouble is a failed run, never an exception
         y = None
-        reason = f"initial state: {error}"
+        failure = Failure(FailureKind.INITIAL_STATE, f"initial state: {error}")
     if y is not None:
         with _THREADPOOLS.limit(limits=1, user_api="blas"):
-            reason = _integrate(
-                y, c, tables, edges, held, times, states, atol, unit, limit, started, stats
+            failure = _integrate(
+                model, y, c, tables, edges, held, times, states, atol, unit, limit, started, stats
             )
 
-    values = _empty_result(times, diagnostics)
+    values = _empty_result(model, times, diagnostics)
     done = np.isfinite(states).all(axis=1)
+    charge = model.charge(c)
     if done.any():
-        evaluated = np.full((times.size, N_EVAL), np.nan)
-        evaluated[done] = outputs_along(states[done], controls[done], c, tables)
+        evaluated = np.full((times.size, model.n_eval), np.nan)
+        evaluated[done] = model.outputs_along(states[done], controls[done], c, tables)
         for k, name in enumerate(values):
             values[name] = evaluated[:, k]
-        mass = evaluated[done, len(OUTPUT_IDS) + list(DIAGNOSTIC_INFO).index("M")]
-        source = evaluated[done, len(OUTPUT_IDS) + list(DIAGNOSTIC_INFO).index("mdot_src")]
-        mass_error = float(np.max(np.abs(mass - c[C_M0])) / c[C_M0])
+        diagnostic = list(model.output_info) + list(model.diagnostic_info)
+        mass = evaluated[done, diagnostic.index("M")]
+        source = evaluated[done, diagnostic.index("mdot_src")]
+        mass_error = float(np.max(np.abs(mass - charge)) / charge)
         source_integral = float(np.trapezoid(np.abs(source), times[done]))
     else:
         mass_error = float("nan")
         source_integral = float("nan")
-    if not reason and not np.isfinite(np.column_stack(list(values.values()))).all():
-        reason = "non-finite outputs"
-    info = {**OUTPUT_INFO, **DIAGNOSTIC_INFO}
+    if failure is None and not np.isfinite(np.column_stack(list(values.values()))).all():
+        failure = Failure(FailureKind.NON_FINITE, "non-finite outputs")
+    info = {**model.output_info, **model.diagnostic_info}
     dataset = xr.Dataset(
         {
             name: ("time", data, {"units": info[name][1], "long_name": info[name][0]})
@@ -186,25 +168,28 @@ def simulate(
         },
         coords={"time": ("time", times, {"units": "s"})},
         attrs={
-            "status": "failed" if reason else "ok",
-            "failure_reason": reason,
+            "status": "failed" if failure else "ok",
+            "failure_kind": failure.kind.value if failure else "",
+            "failure_reason": failure.detail if failure else "",
             "n_rhs": stats["n_rhs"],
             "n_jac": stats["n_jac"],
             "n_steps": stats["n_steps"],
-            "n_states": n_states(n),
+            "n_states": layout.size,
             "wall_time": time.perf_counter() - started,
             "mass_error": mass_error,
             "source_integral": source_integral,
             "unit": unit.name,
+            "cycle": model.name,
         },
     )
     return dataset
 
 
-def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, started, stats):
-    """Fill ``states`` on ``times`` segment by segment; return a failure reason or ""."""
+def _integrate(model, y, c, tables, edges, held, times, states, atol, unit, limit, started, stats):
+    """Fill ``states`` on ``times`` segment by segment; return the :class:`Failure` or None."""
+    evaluate, jacobian = model.evaluate, model.jacobian
     dydt = np.empty(y.size)
-    out = np.empty(N_EVAL)
+    out = np.empty(model.n_eval)
     solver_settings = unit.solver
     for k, u in enumerate(held):
         t0, t1 = float(edges[k]), float(edges[k + 1])
@@ -231,7 +216,10 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
             states[pending[0]] = y
             pending = pending[1:]
         if not evaluate(y, u, c, tables, dydt, out):
-            return f"right-hand side not finite at t = {t0:.1f} s (property out of range)"
+            return Failure(
+                FailureKind.PROPERTY_RANGE,
+                f"right-hand side not finite at t = {t0:.1f} s (property out of range)",
+            )
         try:
             solver = Radau(
                 fun,
@@ -244,34 +232,49 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
                 max_step=solver_settings.max_step,
             )
         except _WallClockLimit:
-            return f"wall-clock limit of {limit:.1f} s reached at t = {t0:.1f} s"
+            return Failure(
+                FailureKind.WALL_CLOCK,
+                f"wall-clock limit of {limit:.1f} s reached at t = {t0:.1f} s",
+            )
         except Exception as error:
-            return f"solver start at t = {t0:.1f} s: {type(error).__name__}: {error}"
+            return Failure(
+                FailureKind.SOLVER,
+                f"solver start at t = {t0:.1f} s: {type(error).__name__}: {error}",
+            )
         _use_direct_lapack(solver)
         while solver.status == "running":
             try:
                 message = solver.step()
             except _WallClockLimit:
-                return f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s"
+                return Failure(
+                    FailureKind.WALL_CLOCK,
+                    f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s",
+                )
             except Exception as error:
-                return f"solver failure at t = {solver.t:.2f} s: {type(error).__name__}: {error}"
+                return Failure(
+                    FailureKind.SOLVER,
+                    f"solver failure at t = {solver.t:.2f} s: {type(error).__name__}: {error}",
+                )
             stats["n_steps"] += 1
             if solver.status == "failed":
                 why = message or "Radau failed"
                 if stats["bad_rhs"]:
                     why += f" (property out of range in {stats['bad_rhs']} evaluations)"
-                return f"solver failure at t = {solver.t:.2f} s: {why}"
+                return Failure(FailureKind.SOLVER, f"solver failure at t = {solver.t:.2f} s: {why}")
             if not np.isfinite(solver.y).all():
-                return f"non-finite state at t = {solver.t:.2f} s"
+                return Failure(FailureKind.NON_FINITE, f"non-finite state at t = {solver.t:.2f} s")
             if pending.size:
                 ready = pending[times[pending] <= solver.t]
                 if ready.size:
                     states[ready] = solver.dense_output()(times[ready]).T
                     pending = pending[ready.size :]
             if time.perf_counter() - started > limit:
-                return f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s"
+                return Failure(
+                    FailureKind.WALL_CLOCK,
+                    f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s",
+                )
         y = solver.y
-    return ""
+    return None
 
 
 _LAPACK_REAL = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1),))
@@ -327,10 +330,11 @@ class VCCSimulator:
         self.unit = load_unit() if unit is None else unit
         self.inputs = builtin_inputs() if inputs is None else inputs
         validate_inputs(self.inputs)
-        selected = tuple(OUTPUT_IDS if outputs is None else outputs)
-        unknown = [name for name in selected if name not in OUTPUT_IDS]
+        output_ids = self.unit.cycle_model.output_ids
+        selected = tuple(output_ids if outputs is None else outputs)
+        unknown = [name for name in selected if name not in output_ids]
         if unknown or not selected:
-            raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(OUTPUT_IDS)}")
+            raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(output_ids)}")
         self.output_names: tuple[str, ...] = selected
         all_ids = self.unit.parameters.ids
         self.parameter_names: tuple[str, ...] = all_ids if parameters is None else tuple(parameters)
@@ -379,6 +383,11 @@ class VCCSimulator:
         result = result[list(self.output_names)]
         return result.sel(time=slice(self.t_window[0], None))
 
+    @property
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        """Bounds (low, high) of every parameter of the unit's table, SI units."""
+        return {spec.id: (spec.low, spec.high) for spec in self.unit.parameters}
+
     def __repr__(self) -> str:
         return (
             f"VCCSimulator(unit={self.unit.name!r}, outputs={list(self.output_names)}, "
@@ -399,7 +408,8 @@ def operating_point(
     ``conditions`` override the unit's rating point (``valve_opening``, ``compressor_speed``,
     ``T_ambient``, ``T_indoor``, SI). Returns the nine outputs and the diagnostics at the end,
     plus ``superheat`` (K, at the suction), ``subcooling`` (K, condenser outlet), ``capacity``
-    (W, evaporator heat), ``COP`` (capacity over compressor and fan power),
+    (W, the cycle's useful heat: evaporator heat cooling, condenser heat heating), ``COP``
+    (capacity over compressor and fan power),
     ``energy_balance_error`` ((Q_cond - Q_evap - W_ref) / Q_cond), ``drift`` (largest relative
     change of an output over the last 100 s) and the run's ``status``/``failure_reason``.
     """
@@ -419,17 +429,21 @@ def operating_point(
         controller=controller,
         output_interval=10.0,
     )
-    final = {name: float(result[name].values[-1]) for name in result.data_vars}
+    final = {str(name): float(result[name].values[-1]) for name in result.data_vars}
     tables = _fluid(unit.refrigerant).tables
     recent = result.sel(time=slice(duration - 100.0, None))
+    model = unit.cycle_model
     drift = max(
-        float(np.ptp(recent[name].values) / abs(recent[name].values[-1])) for name in OUTPUT_IDS
+        float(np.ptp(recent[name].values) / abs(recent[name].values[-1]))
+        for name in model.output_ids
     )
-    return final | {
+    capacity = final[model.capacity]
+    summary: dict[str, float | str] = dict(final)
+    return summary | {
         "superheat": final["TS"] - saturation_state(tables, final["PS"])[0],
         "subcooling": saturation_state(tables, final["PC"])[0] - final["TC"],
-        "capacity": final["Q_evap"],
-        "COP": final["Q_evap"] / (final["W_comp"] + final["W_fans"]),
+        "capacity": capacity,
+        "COP": capacity / (final["W_comp"] + final["W_fans"]),
         "energy_balance_error": (final["Q_cond"] - final["Q_evap"] - final["W_ref"])
         / final["Q_cond"],
         "drift": drift,

@@ -1,9 +1,12 @@
-"""Unit descriptions: fixed geometry, refrigerant, discretisation, solver settings, parameters.
+"""Unit descriptions: cycle model, fixed geometry, refrigerant, discretisation, solver settings,
+parameters.
 
 A unit description is a TOML file (the built-in one ships as ``pymc_vcc/data/split_3p5kw_r410a
-.toml``). Loading validates it completely before any simulation runs: unknown keys, missing
-values, non-positive sizes, bounds with low >= high, nominals outside their bounds and unknown
-refrigerants are errors that name the field and what is allowed. All values are SI.
+.toml``; the format is documented in ``models/README.md``). ``[unit] cycle`` names its cycle
+model (default ``split-cooling``) and the parameters are checked against that model's own table.
+Loading validates it completely before any simulation runs: unknown keys, missing values,
+non-positive sizes, bounds with low >= high, nominals outside their bounds, unknown cycles and
+unknown refrigerants are errors that name the field and what is allowed. All values are SI.
 """
 
 from __future__ import annotations
@@ -13,12 +16,20 @@ import tomllib
 from dataclasses import dataclass, fields
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pymc_vcc.physics.parameters import ParameterSpec, ParameterTable, parameter_table
+from pymc_vcc.physics.parameters import ParameterIds, ParameterSpec, ParameterTable, parameter_table
+
+if TYPE_CHECKING:
+    from pymc_vcc.physics.cycles.base import CycleModel
 
 BUILTIN_UNIT = "split_3p5kw_r410a.toml"
 """File name of the built-in unit description inside ``pymc_vcc/data``."""
+
+HEAT_PUMP_UNIT = "heat_pump_3p5kw_r410a.toml"
+"""The same split unit as a heat pump in heating mode, inside ``pymc_vcc/data``."""
+
+SHIPPED_UNITS = (BUILTIN_UNIT, HEAT_PUMP_UNIT)
 
 
 @dataclass(frozen=True)
@@ -146,6 +157,11 @@ _SECTIONS: dict[str, type] = {
     "rating": RatingPoint,
 }
 
+DEFAULT_CYCLE = "split-cooling"
+"""The cycle of a unit description that names none."""
+
+_HEAD_KEYS = ["name", "description", "refrigerant", "cycle"]
+
 _FRACTIONS = {
     ("compressor", "clearance"),
     ("compressor", "isentropic_efficiency"),
@@ -160,6 +176,7 @@ class Unit:
     name: str
     description: str
     refrigerant: str
+    cycle: str
     discretisation: Discretisation
     solver: SolverSettings
     controller: ControllerSettings
@@ -176,6 +193,13 @@ class Unit:
     pressure_drop: PressureDrop
     rating: RatingPoint
     parameters: ParameterTable
+
+    @property
+    def cycle_model(self) -> CycleModel:
+        """The cycle model this unit runs (``[unit] cycle``)."""
+        from pymc_vcc.physics.cycles import cycle_model
+
+        return cycle_model(self.cycle)
 
     def with_changes(self, **sections: dict[str, Any]) -> Unit:
         """A copy with some fields of some sections replaced, validated like a loaded file.
@@ -227,7 +251,7 @@ def _section(source: str, section: str, cls: type, raw: Any) -> Any:
     return cls(**values)
 
 
-def _parameters(source: str, raw: Any) -> ParameterTable:
+def _parameters(source: str, raw: Any, expected: ParameterIds) -> ParameterTable:
     if not isinstance(raw, dict):
         raise ValueError(f"{source} [parameters]: expected one table per parameter id")
     specs = []
@@ -260,7 +284,7 @@ def _parameters(source: str, raw: Any) -> ParameterTable:
         except ValueError as error:
             raise ValueError(f"{source}: {error}") from None
     try:
-        return parameter_table(specs)
+        return parameter_table(specs, expected)
     except ValueError as error:
         raise ValueError(f"{source}: {error}") from None
 
@@ -283,15 +307,30 @@ def unit_from_dict(data: dict[str, Any], source: str = "unit description") -> Un
     head = data["unit"]
     if not isinstance(head, dict):
         raise ValueError(f"{source} [unit]: expected a table")
-    _check_keys(f"{source} [unit]", head, ["name", "description", "refrigerant"])
+    _check_keys(
+        f"{source} [unit]", {"cycle": DEFAULT_CYCLE} | head, _HEAD_KEYS
+    )  # ``cycle`` may be left out: the built-in split cooling cycle
+    model = _check_cycle(source, head.get("cycle", DEFAULT_CYCLE))
     sections = {name: _section(source, name, cls, data[name]) for name, cls in _SECTIONS.items()}
     return Unit(
         name=str(head["name"]),
         description=str(head["description"]),
         refrigerant=_check_refrigerant(source, head["refrigerant"]),
-        parameters=_parameters(source, data["parameters"]),
+        cycle=model.name,
+        parameters=_parameters(source, data["parameters"], model.parameters),
         **sections,
     )
+
+
+def _check_cycle(source: str, name: Any) -> CycleModel:
+    from pymc_vcc.physics.cycles import cycle_model
+
+    if not isinstance(name, str):
+        raise ValueError(f"{source} [unit] cycle: expected a name, got {name!r}")
+    try:
+        return cycle_model(name)
+    except ValueError as error:
+        raise ValueError(f"{source} [unit] cycle: {error}") from None
 
 
 def unit_to_dict(unit: Unit) -> dict[str, Any]:
@@ -301,6 +340,7 @@ def unit_to_dict(unit: Unit) -> dict[str, Any]:
             "name": unit.name,
             "description": unit.description,
             "refrigerant": unit.refrigerant,
+            "cycle": unit.cycle,
         }
     }
     for name in _SECTIONS:
@@ -319,14 +359,18 @@ def unit_to_dict(unit: Unit) -> dict[str, Any]:
 
 
 def load_unit(path: str | Path | None = None) -> Unit:
-    """Load and validate a unit description; ``None`` loads the built-in 3.5 kW R410A split."""
-    if path is None:
-        text = resources.files("pymc_vcc").joinpath("data", BUILTIN_UNIT).read_text()
-        source = BUILTIN_UNIT
+    """Load and validate a unit description: a TOML file, or the file name of a shipped one
+    (:data:`SHIPPED_UNITS`); ``None`` loads the built-in 3.5 kW R410A split in cooling mode."""
+    name = BUILTIN_UNIT if path is None else str(path)
+    if name in SHIPPED_UNITS and (path is None or not Path(name).is_file()):
+        text = resources.files("pymc_vcc").joinpath("data", name).read_text()
+        source = name
     else:
-        path = Path(path)
+        path = Path(name)
         if not path.is_file():
-            raise FileNotFoundError(f"unit description {path} does not exist")
+            raise FileNotFoundError(
+                f"unit description {path} does not exist (shipped units: {list(SHIPPED_UNITS)})"
+            )
         text = path.read_text()
         source = str(path)
     try:

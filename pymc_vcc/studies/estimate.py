@@ -20,7 +20,7 @@ import xarray as xr
 from pymc_vcc.inference.predictive import sample_posterior_predictive
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
-from pymc_vcc.physics.cycle import OUTPUT_IDS
+from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_inputs, plot_predictive, plot_prior_posterior, save_figure

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import xarray as xr
 
 from pymc_vcc.inference.sensitivity import sobol_indices
-from pymc_vcc.physics.cycle import OUTPUT_IDS
+from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_sobol_heatmap, save_figure

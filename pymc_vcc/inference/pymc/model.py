@@ -36,7 +36,8 @@ from pymc_vcc.execution.outcomes import SimulationOutcome, run_simulation
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import NOISE_PREFIX, add_output_noise, noise_parameter, with_noise
 from pymc_vcc.inference.priors import Bounds, GMMPrior, Prior, UniformPrior, check_prior_support
-from pymc_vcc.inference.series import ObservedData, OutputData, Simulator, prepare_observed
+from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
+from pymc_vcc.inference.simulator import Simulator, check_simulator
 
 
 def gaussian_log_kernel(distance: np.ndarray | float, epsilon: float) -> np.ndarray:
@@ -254,26 +255,25 @@ def prior_variables(prior: Prior, *, joint_name: str = "theta") -> dict[str, Ten
 def simulator_bounds(
     simulator: Simulator, parameters: Sequence[str] | None = None
 ) -> dict[str, tuple[float, float]]:
-    """Physical bounds of a simulator's parameters: its ``bounds`` attribute or its unit's table.
+    """Physical bounds of a simulator's parameters (its ``bounds``, see
+    :class:`~pymc_vcc.inference.simulator.BoundedSimulator`).
 
     Args:
-        simulator: a simulator with ``bounds`` (name -> (low, high), as in
-            :mod:`pymc_vcc.testing`) or with a unit description (``simulator.unit.parameters``,
-            Table III of the paper, as :class:`pymc_vcc.physics.simulate.VCCSimulator`).
+        simulator: a simulator with ``bounds`` (name -> (low, high)), as those of
+            :mod:`pymc_vcc.testing` and :class:`pymc_vcc.physics.simulate.VCCSimulator` (its
+            unit's parameter table) have.
         parameters: names to keep, in this order (default: the simulator's
             ``parameter_names`` if it has them, else all).
     """
-    if hasattr(simulator, "bounds"):
-        available = dict(simulator.bounds)
-    elif hasattr(simulator, "unit"):
-        available = {spec.id: (spec.low, spec.high) for spec in simulator.unit.parameters}
-    else:
+    info = check_simulator(simulator)
+    if info.bounds is None:
         raise ValueError(
             f"{type(simulator).__name__} has neither `bounds` nor a unit description; "
             "pass prior= explicitly"
         )
+    available = info.bounds
     if parameters is None:
-        parameters = getattr(simulator, "parameter_names", None) or list(available)
+        parameters = info.parameter_names or list(available)
     if isinstance(parameters, str):
         raise TypeError(f"parameters must be a sequence of names, got the string {parameters!r}")
     unknown = [name for name in parameters if name not in available]
@@ -341,7 +341,8 @@ def add_simulator(
     model = pm.modelcontext(None)
     if not np.isfinite(epsilon) or epsilon <= 0:
         raise ValueError(f"epsilon must be a positive number, got {epsilon}")
-    data = prepare_observed(observed, outputs, getattr(simulator, "output_names", None))
+    info = check_simulator(simulator)
+    data = prepare_observed(observed, outputs, info.output_names)
 
     if prior is None:
         prior = UniformPrior(simulator_bounds(simulator, parameters))
@@ -350,7 +351,7 @@ def add_simulator(
     if noise is not None and not isinstance(noise, Mapping):
         noise = dict.fromkeys(data.names, noise)
     prior = with_noise(prior, noise, data.names)
-    check_prior_support(simulator, prior.bounds)
+    check_prior_support(info.support, prior.bounds)
 
     noise_outputs = tuple(out for out in data.names if noise_parameter(out) in prior.names)
     stray_noise = [
@@ -369,7 +370,7 @@ def add_simulator(
             f"parameters {list(parameters)} differ from the prior's parameters "
             f"{list(model_parameters)}"
         )
-    known = getattr(simulator, "parameter_names", None)
+    known = info.parameter_names
     if known is not None:
         unknown = [n for n in model_parameters if n not in known]
         if unknown:

@@ -7,10 +7,30 @@ The four Table III correction factors act here: ``cf_vol`` on the volumetric eff
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 from pymc_vcc.physics.components.smooth import smooth_max, smooth_min, smooth_pos, smooth_step
 from pymc_vcc.physics.refrigerant import entropy, h_from_ps, h_from_pT, state
+
+COMPRESSOR_RECORD = np.dtype(
+    [
+        ("displacement", np.float64),  # m³ per revolution
+        ("clearance", np.float64),  # clearance ratio of the volumetric-efficiency model, -
+        ("exponent", np.float64),  # polytropic re-expansion exponent, -
+        ("isentropic_efficiency", np.float64),  # -
+        ("refrigerant_fraction", np.float64),  # share of shaft power reaching the refrigerant, -
+        ("shell_ua", np.float64),  # shell heat-loss conductance to ambient, W/K
+        ("cf_vol", np.float64),  # Table III correction factors, -
+        ("cf_pow", np.float64),
+        ("cf_pref", np.float64),
+        ("cf_shell", np.float64),
+        ("T_discharge_max", np.float64),  # thermal limit of the discharge gas, K
+        ("p_protection_start", np.float64),  # high-pressure protection: droop starts, Pa
+        ("p_protection_stop", np.float64),  # ... and reaches 5 % speed, Pa
+    ]
+)
+"""The compressor's parameters as one Numba record (a field of a cycle's constants record)."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -60,17 +80,7 @@ def compressor(
     p_discharge: float,
     speed: float,
     T_ambient: float,
-    displacement: float,
-    clearance: float,
-    exponent: float,
-    isentropic_efficiency: float,
-    refrigerant_fraction: float,
-    shell_ua: float,
-    cf_vol: float,
-    cf_pow: float,
-    cf_pref: float,
-    cf_shell: float,
-    T_discharge_max: float,
+    params,
 ) -> tuple[float, float, float, float]:
     """(ṁ kg/s, discharge enthalpy J/kg, shaft power W, net power to the refrigerant W).
 
@@ -78,17 +88,21 @@ def compressor(
     at the temperature the gas would reach without it. The shell loss grows smoothly (over
     2 kJ/kg) wherever the discharge would exceed ``T_discharge_max`` (K), the compressor's
     thermal limit, so the discharge state stays inside the property tables. Non-finite (NaN)
-    results mean a property call left the tables.
+    results mean a property call left the tables. ``params`` is a :data:`COMPRESSOR_RECORD`.
     """
-    eta_vol = volumetric_efficiency(p_discharge / p_suction, clearance, exponent, cf_vol)
-    mass_flow = compressor_mass_flow(rho_suction, speed, displacement, eta_vol)
+    eta_vol = volumetric_efficiency(
+        p_discharge / p_suction, params.clearance, params.exponent, params.cf_vol
+    )
+    mass_flow = compressor_mass_flow(rho_suction, speed, params.displacement, eta_vol)
     s_suction = entropy(tables, p_suction, h_suction)
     h_isentropic = h_from_ps(tables, p_discharge, s_suction)
-    power = shaft_power(mass_flow, h_isentropic - h_suction, isentropic_efficiency, cf_pow)
-    to_refrigerant = cf_pref * refrigerant_fraction * power
-    h_limit = h_from_pT(tables, p_discharge, T_discharge_max)
+    power = shaft_power(
+        mass_flow, h_isentropic - h_suction, params.isentropic_efficiency, params.cf_pow
+    )
+    to_refrigerant = params.cf_pref * params.refrigerant_fraction * power
+    h_limit = h_from_pT(tables, p_discharge, params.T_discharge_max)
     h_adiabatic = smooth_min(h_suction + to_refrigerant / mass_flow, h_limit, 2e3)
     T_adiabatic = state(tables, p_discharge, h_adiabatic)[0]
-    net = to_refrigerant - shell_loss(shell_ua, cf_shell, T_adiabatic, T_ambient)
+    net = to_refrigerant - shell_loss(params.shell_ua, params.cf_shell, T_adiabatic, T_ambient)
     h_discharge = smooth_min(h_suction + net / mass_flow, h_limit, 2e3)
     return mass_flow, h_discharge, power, mass_flow * (h_discharge - h_suction)

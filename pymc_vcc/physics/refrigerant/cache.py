@@ -13,6 +13,7 @@ import zipfile
 from dataclasses import astuple
 from importlib.metadata import version
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -65,9 +66,8 @@ def load_tables(path: Path) -> PropertyTables | None:
             fields = {name: data[name] for name in PropertyTables._fields}
     except (FileNotFoundError, KeyError, ValueError, OSError, zipfile.BadZipFile):
         return None
-    return PropertyTables(
-        **{
-            name: float(value) if value.ndim == 0 else np.ascontiguousarray(value, dtype=np.float64)
-            for name, value in fields.items()
-        }
-    )
+    values: dict[str, Any] = {
+        name: float(value) if value.ndim == 0 else np.ascontiguousarray(value, dtype=np.float64)
+        for name, value in fields.items()
+    }
+    return PropertyTables(**values)

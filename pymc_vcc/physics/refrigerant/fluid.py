@@ -67,16 +67,12 @@ class Saturation(NamedTuple):
 
 def _flat(*values: ArrayLike) -> tuple[tuple[int, ...], list[NDArray[np.float64]]]:
     """Broadcast ``values`` and return their shape and contiguous 1-D float64 arrays."""
-    first = values[0]
-    if all(
-        isinstance(v, np.ndarray)
-        and v.dtype == np.float64
-        and v.ndim == 1
-        and v.shape == first.shape
-        and v.flags.c_contiguous
-        for v in values
+    ready = [v for v in values if isinstance(v, np.ndarray)]
+    if len(ready) == len(values) and all(
+        v.dtype == np.float64 and v.ndim == 1 and v.shape == ready[0].shape and v.flags.c_contiguous
+        for v in ready
     ):
-        return first.shape, list(values)
+        return ready[0].shape, ready
     arrays = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in values))
     return arrays[0].shape, [np.ascontiguousarray(a).ravel() for a in arrays]
 

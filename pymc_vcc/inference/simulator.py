@@ -1,0 +1,109 @@
+"""The simulator contract samplers rely on, checked once per run.
+
+A simulator is any picklable callable ``simulator(theta, rng) -> outputs`` (:class:`Simulator`):
+parameters by name (SI units), a random generator, outputs as a Dataset or an (outputs, time)
+array. It may also name its parameters (:class:`NamesParameters`) and outputs
+(:class:`NamesOutputs`) and give its parameter box (:class:`BoundedSimulator`), as
+:class:`~pymc_vcc.physics.simulate.VCCSimulator` does.
+:func:`check_simulator` reads all of it once, into a :class:`SimulatorInfo`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from pymc_vcc.inference.series import OutputData
+
+Bounds = dict[str, tuple[float, float]]
+
+
+@runtime_checkable
+class Simulator(Protocol):
+    """``simulator(theta, rng) -> outputs``; picklable (a module-level function, a
+    ``functools.partial`` of one, or an instance of a module-level class) to run in other
+    processes."""
+
+    def __call__(
+        self, theta: Mapping[str, float], rng: np.random.Generator | None, /
+    ) -> OutputData: ...
+
+
+@runtime_checkable
+class NamesParameters(Protocol):
+    """A simulator that names the parameters it takes, so samplers can check priors."""
+
+    parameter_names: Sequence[str]
+
+
+@runtime_checkable
+class NamesOutputs(Protocol):
+    """A simulator that names its outputs, so samplers can check observed data."""
+
+    output_names: Sequence[str]
+
+
+@runtime_checkable
+class BoundedSimulator(Protocol):
+    """A simulator that knows its parameters' physical bounds (name -> (low, high))."""
+
+    bounds: Mapping[str, tuple[float, float]]
+
+
+@runtime_checkable
+class RestrictsPriors(Protocol):
+    """A simulator valid only inside ``parameter_bounds`` (name -> (low, high)): samplers refuse
+    priors that reach outside them; None allows any prior (extrapolation)."""
+
+    parameter_bounds: Mapping[str, tuple[float, float]] | None
+
+
+@dataclass(frozen=True)
+class SimulatorInfo:
+    """What a simulator tells about itself; ``None`` where it does not say."""
+
+    parameter_names: tuple[str, ...] | None
+    output_names: tuple[str, ...] | None
+    bounds: Bounds | None
+    support: Bounds | None
+
+
+def check_simulator(simulator: Any) -> SimulatorInfo:
+    """Check that ``simulator`` keeps the contract and read its description, once.
+
+    Raises ``TypeError`` naming what is wrong: not callable, or names that are not sequences
+    of strings.
+    """
+    if not isinstance(simulator, Simulator):
+        raise TypeError(
+            f"the simulator must be callable as simulator(theta, rng), got "
+            f"{type(simulator).__name__}"
+        )
+    parameter_names = output_names = None
+    if isinstance(simulator, NamesParameters):
+        parameter_names = _names(simulator, "parameter_names", simulator.parameter_names)
+    if isinstance(simulator, NamesOutputs):
+        output_names = _names(simulator, "output_names", simulator.output_names)
+    bounds: Bounds | None = None
+    if isinstance(simulator, BoundedSimulator):
+        bounds = {name: (float(lo), float(hi)) for name, (lo, hi) in simulator.bounds.items()}
+    support: Bounds | None = None
+    if isinstance(simulator, RestrictsPriors) and simulator.parameter_bounds is not None:
+        support = {
+            name: (float(lo), float(hi)) for name, (lo, hi) in simulator.parameter_bounds.items()
+        }
+    return SimulatorInfo(parameter_names, output_names, bounds, support)
+
+
+def _names(simulator: object, attribute: str, value: object) -> tuple[str, ...]:
+    if isinstance(value, str) or not isinstance(value, Sequence):
+        raise TypeError(
+            f"{type(simulator).__name__}.{attribute} must be a sequence of names, got {value!r}"
+        )
+    names = tuple(value)
+    if not all(isinstance(name, str) for name in names):
+        raise TypeError(f"{type(simulator).__name__}.{attribute} must hold strings: {names}")
+    return names

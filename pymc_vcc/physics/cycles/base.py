@@ -1,0 +1,291 @@
+"""What every cycle model provides, and the Numba kernels that need no topology.
+
+A cycle model (one module per topology) owns its parameter table, inputs, outputs and
+diagnostics, and one :class:`StateLayout` built from named blocks. The layout fixes every offset
+once; Numba reads them from the layout's record (``c.layout.<block>``), never from a number
+written in the code. A pressure zone is a ``PRESSURE`` block followed by the ``ENTHALPY``
+blocks of its cells in flow order, so cell properties, total mass and the columns of the
+Jacobian follow from the layout alone.
+
+The driver (:mod:`pymc_vcc.physics.simulate`) integrates any :class:`CycleModel` through its
+Numba kernels ``evaluate``, ``jacobian``, ``outputs_along`` and ``total_mass``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+from numba import njit
+
+from pymc_vcc.physics.components.density import cell_state
+from pymc_vcc.physics.records import make_record
+
+if TYPE_CHECKING:
+    from pymc_vcc.physics.unit import SolverSettings, Unit
+
+N_PROPERTIES = 5
+"""Rows of a cell-property array: T (K), ρ (kg/m³), ∂ρ/∂p, ∂ρ/∂h, quality."""
+
+INTEGRAL_ATOL = 1e-4
+"""Absolute tolerance of a controller integral, kg s."""
+
+
+class BlockKind(StrEnum):
+    """What a block of the state holds; sets its tolerance and its role in a zone."""
+
+    PRESSURE = "pressure"  # the pressure of a zone, Pa; the zone's cell enthalpies follow it
+    ENTHALPY = "enthalpy"  # refrigerant cell enthalpies, J/kg
+    TEMPERATURE = "temperature"  # wall temperatures, K
+    INTEGRAL = "integral"  # controller integral, kg s
+
+
+@dataclass(frozen=True)
+class Block:
+    """A named, contiguous part of the state vector."""
+
+    name: str
+    size: int
+    kind: BlockKind
+
+
+class StateLayout:
+    """The state vector as named blocks: offsets computed once, handed to Numba as a record."""
+
+    def __init__(self, blocks: Sequence[Block]) -> None:
+        names = [block.name for block in blocks]
+        if len(set(names)) != len(names) or {"size", "zones"} & set(names):
+            raise ValueError(f"state blocks need distinct names other than size, zones: {names}")
+        self.blocks: tuple[Block, ...] = tuple(blocks)
+        self._blocks = {block.name: block for block in self.blocks}
+        self._start: dict[str, int] = {}
+        zones: list[list[int]] = []
+        offset = 0
+        previous: BlockKind | None = None
+        for block in self.blocks:
+            if block.size < 1:
+                raise ValueError(f"state block {block.name!r}: size must be >= 1")
+            if block.kind is BlockKind.PRESSURE:
+                if block.size != 1:
+                    raise ValueError(f"pressure block {block.name!r} must have size 1")
+                zones.append([offset, 0])
+            elif block.kind is BlockKind.ENTHALPY:
+                if previous not in (BlockKind.PRESSURE, BlockKind.ENTHALPY):
+                    raise ValueError(
+                        f"enthalpy block {block.name!r} must follow its zone's pressure block"
+                    )
+                zones[-1][1] += block.size
+            self._start[block.name] = offset
+            offset += block.size
+            previous = block.kind
+        self.size = offset
+        self.zones = np.array(zones, dtype=np.int64).reshape(-1, 2)
+        """Per zone: (offset of its pressure, number of cells); cells follow the pressure."""
+        self.n_cells = int(self.zones[:, 1].sum())
+        self.dtype = np.dtype(
+            [(name, np.int64) for name in names]
+            + [("size", np.int64), ("zones", np.int64, self.zones.shape)]
+        )
+        """Record type of :attr:`record` (depends on the block names, not their sizes)."""
+
+    def __getitem__(self, name: str) -> slice:
+        """Where block ``name`` lives in the state vector."""
+        start = self.start(name)
+        return slice(start, start + self._blocks[name].size)
+
+    def start(self, name: str) -> int:
+        """Offset of block ``name``."""
+        if name not in self._start:
+            raise KeyError(f"unknown state block {name!r}; blocks are {list(self._start)}")
+        return self._start[name]
+
+    @property
+    def record(self) -> np.void:
+        """The offsets as a Numba record: one field per block, ``size`` and ``zones``."""
+        return make_record(self.dtype, {**self._start, "size": self.size, "zones": self.zones})
+
+    def tolerances(self, solver: SolverSettings) -> np.ndarray:
+        """Absolute tolerances of the state, by block kind, from the unit's solver settings."""
+        by_kind = {
+            BlockKind.PRESSURE: solver.atol_pressure,
+            BlockKind.ENTHALPY: solver.atol_enthalpy,
+            BlockKind.TEMPERATURE: solver.atol_temperature,
+            BlockKind.INTEGRAL: INTEGRAL_ATOL,
+        }
+        atol = np.empty(self.size)
+        for block in self.blocks:
+            atol[self[block.name]] = by_kind[block.kind]
+        return atol
+
+
+class CycleModel(ABC):
+    """One cycle topology: its parameters, outputs, state layout and Numba kernels.
+
+    Kernels (Numba dispatchers; ``c`` is the one-element record array of :meth:`constants`,
+    ``u`` the inputs ordered as :data:`~pymc_vcc.physics.inputs.INPUT_IDS`):
+
+    * ``evaluate(y, u, c, tables, dydt, out) -> bool``: dy/dt into ``dydt``, outputs then
+      diagnostics into ``out``; False when a property left the tables;
+    * ``jacobian(y, u, c, tables, f0) -> ndarray``: ∂f/∂y given f0 = f(y);
+    * ``outputs_along(ys, us, c, tables) -> ndarray``: outputs and diagnostics row by row;
+    * ``total_mass(y, c, tables) -> float``: refrigerant mass, kg.
+    """
+
+    name: ClassVar[str]
+    """The id a unit description names in ``[unit] cycle``."""
+    description: ClassVar[str]
+    parameters: ClassVar[tuple[tuple[str, str], ...]]
+    """(id, unit) of the calibration parameters a unit of this cycle must give."""
+    output_info: ClassVar[dict[str, tuple[str, str]]]
+    """Long name and unit of each output, in order."""
+    diagnostic_info: ClassVar[dict[str, tuple[str, str]]]
+    """Further quantities after the outputs; must include ``M`` (kg) and ``mdot_src`` (kg/s)."""
+    capacity: ClassVar[str]
+    """The diagnostic that is the unit's useful heat, W (what its COP divides)."""
+    evaluate: ClassVar[Callable[..., bool]]
+    jacobian: ClassVar[Callable[..., np.ndarray]]
+    outputs_along: ClassVar[Callable[..., np.ndarray]]
+    total_mass: ClassVar[Callable[..., float]]
+
+    @property
+    def output_ids(self) -> tuple[str, ...]:
+        """Output ids in the order of ``out``."""
+        return tuple(self.output_info)
+
+    @property
+    def n_eval(self) -> int:
+        """Length of ``out``: outputs then diagnostics."""
+        return len(self.output_info) + len(self.diagnostic_info)
+
+    @abstractmethod
+    def layout(self, n_volumes: int) -> StateLayout:
+        """The state layout for ``n_volumes`` cells per heat exchanger."""
+
+    @abstractmethod
+    def constants(
+        self, unit: Unit, theta: np.ndarray, controller: bool | None = None
+    ) -> np.ndarray:
+        """The constants record (a one-element structured array) from a unit and a parameter
+        vector ordered as :attr:`parameters`; ``controller`` overrides the unit's
+        charge-controller switch."""
+
+    @abstractmethod
+    def initial_state(
+        self, c: np.ndarray, n_volumes: int, inputs: np.ndarray, tables
+    ) -> np.ndarray:
+        """A state holding exactly the charge :meth:`charge` at the first inputs ``inputs``;
+        ``ValueError`` if the unit cannot hold it."""
+
+    def charge(self, c: np.ndarray) -> float:
+        """The charge M0 the controller holds, kg."""
+        return float(c[0]["controller"]["m0"])
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r})"
+
+
+def place_charge(
+    fill: Callable[[float], np.ndarray],
+    mass: Callable[[np.ndarray], float],
+    target: float,
+    low: float = -1.0,
+    high: float = 2.0,
+) -> np.ndarray:
+    """The state ``fill(s)`` holding ``target`` kg, with the fill level ``s`` in [low, high]
+    found by bisection (``mass(fill(s))`` must grow with ``s``); ``ValueError`` if the charge
+    does not fit."""
+    m_low = mass(fill(low))
+    m_high = mass(fill(high))
+    if not m_low <= target <= m_high:
+        raise ValueError(
+            f"charge M0 = {target} kg cannot be placed in this unit at start-up: it holds "
+            f"{m_low:.3f} to {m_high:.3f} kg"
+        )
+    for _ in range(60):
+        mid = 0.5 * (low + high)
+        if mass(fill(mid)) < target:
+            low = mid
+        else:
+            high = mid
+    return fill(0.5 * (low + high))
+
+
+# ---- Numba kernels that read only the layout ----------------------------------------------
+
+
+@njit(cache=True, error_model="numpy")
+def cell_row(y, zones, i, tables, props):
+    """Properties of cell ``i`` (cells numbered zone after zone) into column ``i`` of
+    ``props``."""
+    zone = 0
+    k = i
+    while k >= zones[zone, 1]:
+        k -= zones[zone, 1]
+        zone += 1
+    p_index = zones[zone, 0]
+    T, rho, drho_dp, drho_dh, x = cell_state(tables, y[p_index], y[p_index + 1 + k])
+    props[0, i] = T
+    props[1, i] = rho
+    props[2, i] = drho_dp
+    props[3, i] = drho_dh
+    props[4, i] = x
+
+
+@njit(cache=True, error_model="numpy")
+def cell_properties(y, zones, tables, props):
+    """Fill ``props`` (shape (N_PROPERTIES, cells)) for every cell; False if a property left
+    the tables."""
+    for i in range(props.shape[1]):
+        cell_row(y, zones, i, tables, props)
+    return bool(np.isfinite(props[1]).all())
+
+
+@njit(cache=True, error_model="numpy")
+def stored_mass(volumes, rho):
+    """Σ V ρ over the cells, kg."""
+    mass = 0.0
+    for i in range(volumes.size):
+        mass += volumes[i] * rho[i]
+    return mass
+
+
+@njit(cache=True, error_model="numpy")
+def column_cells(zones, j):
+    """(first, last) cell whose properties state variable ``j`` changes: a zone's cells for its
+    pressure, one cell for an enthalpy, none (0, -1) for anything else."""
+    first = 0
+    for zone in range(zones.shape[0]):
+        p_index = zones[zone, 0]
+        count = zones[zone, 1]
+        if j == p_index:
+            return first, first + count - 1
+        if p_index < j <= p_index + count:
+            return first + j - p_index - 1, first + j - p_index - 1
+        first += count
+    return 0, -1
+
+
+@njit(cache=True, error_model="numpy")
+def perturb(y, work, j, zones, tables, props):
+    """Step state variable ``j`` of ``work`` for a forward difference and update the cell
+    properties it touches; returns the step."""
+    step = 1e-7 * max(abs(y[j]), 1.0)
+    work[j] = y[j] + step
+    first, last = column_cells(zones, j)
+    for i in range(first, last + 1):
+        cell_row(work, zones, i, tables, props)
+    return step
+
+
+@njit(cache=True, error_model="numpy")
+def restore(y, work, j, zones, props, saved):
+    """Undo :func:`perturb`: state variable ``j`` and the cell properties it touched."""
+    first, last = column_cells(zones, j)
+    for i in range(first, last + 1):
+        for k in range(N_PROPERTIES):
+            props[k, i] = saved[k, i]
+    work[j] = y[j]

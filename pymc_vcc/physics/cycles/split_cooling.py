@@ -1,0 +1,380 @@
+"""Split air conditioner in cooling mode: the outdoor coil condenses, the indoor coil evaporates.
+
+Two pressure zones (N = cells per heat exchanger):
+
+* high side: the condenser's N cells, then the liquid line (one adiabatic cell); outflow: valve;
+* low side: the evaporator's N cells, the vapour line and the suction tank; outflow: compressor.
+
+The virtual PI charge controller (paper, section II-B) adds ṁ_src = Kp (M0 - M) + Ki z at the
+compressor discharge, at the discharge enthalpy (leaving at the first condenser cell's own
+enthalpy when negative), with ż = M0 - M. Lumped pressure drops: condenser (at its inlet, so
+PD = PC + Δp), evaporator and vapour line (between the low-side zone and the compressor
+suction, so PS = PE - Δp), liquid line (in series with the valve).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numba import njit
+
+from pymc_vcc.physics.components.compressor import (
+    compressor,
+    protection_speed_factor,
+    volumetric_efficiency,
+)
+from pymc_vcc.physics.components.density import cell_state
+from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
+from pymc_vcc.physics.components.fan import air_inlet_temperature
+from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
+from pymc_vcc.physics.components.heat_transfer import air_side_heat, refrigerant_htc, wall_heat
+from pymc_vcc.physics.components.pipe import pressure_drop
+from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
+from pymc_vcc.physics.components.suction_tank import tank_outlet_enthalpy
+from pymc_vcc.physics.cycles.base import (
+    N_PROPERTIES,
+    Block,
+    BlockKind,
+    CycleModel,
+    StateLayout,
+    cell_properties,
+    perturb,
+    place_charge,
+    restore,
+    stored_mass,
+)
+from pymc_vcc.physics.cycles.split_unit import (
+    DIAGNOSTIC_INFO,
+    OUTPUT_INFO,
+    PARAMETERS,
+    split_unit_constants,
+)
+from pymc_vcc.physics.refrigerant import p_sat_from_T, saturation_state, state
+
+if TYPE_CHECKING:
+    from pymc_vcc.physics.unit import Unit
+
+N_EVAL = len(OUTPUT_INFO) + len(DIAGNOSTIC_INFO)
+
+# regularisation widths
+FLOW_EPS = 1e-4  # kg/s, upwind weights and |ṁ| in pressure drops
+SRC_EPS = 1e-5  # kg/s, sign of the charge-controller source
+DP_REG = 2e4  # Pa, valve square root
+TANK_WIDTH = 2e3  # J/kg, tank outlet smooth max
+
+
+def layout(n_volumes: int) -> StateLayout:
+    """The state: two zones (pressure, then cell enthalpies in flow order), walls, integral."""
+    return StateLayout(
+        [
+            Block("p_cond", 1, BlockKind.PRESSURE),
+            Block("h_cond", n_volumes, BlockKind.ENTHALPY),
+            Block("h_liquid_line", 1, BlockKind.ENTHALPY),
+            Block("Tw_cond", n_volumes, BlockKind.TEMPERATURE),
+            Block("p_evap", 1, BlockKind.PRESSURE),
+            Block("h_evap", n_volumes, BlockKind.ENTHALPY),
+            Block("h_vapor_line", 1, BlockKind.ENTHALPY),
+            Block("h_tank", 1, BlockKind.ENTHALPY),
+            Block("Tw_evap", n_volumes, BlockKind.TEMPERATURE),
+            Block("z", 1, BlockKind.INTEGRAL),
+        ]
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def cell_volumes(c):
+    """Volume of every cell (numbered zone after zone), m³."""
+    n = c.layout.h_liquid_line - c.layout.h_cond
+    volumes = np.empty(2 * n + 3)
+    volumes[:n] = c.condenser.cell_volume
+    volumes[n] = c.liquid_line.volume
+    volumes[n + 1 : 2 * n + 1] = c.evaporator.cell_volume
+    volumes[2 * n + 1] = c.vapor_line.volume
+    volumes[2 * n + 2] = c.tank_volume
+    return volumes
+
+
+@njit(cache=True, error_model="numpy")
+def evaluate(y, u, constants, tables, dydt, out):
+    """Right-hand side and outputs at state ``y`` under inputs ``u`` = (valve opening,
+    compressor speed Hz, T_ambient K, T_indoor K); see :class:`~.base.CycleModel`."""
+    c = constants[0]
+    props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
+    cell_properties(y, c.layout.zones, tables, props)
+    return balances(y, u, c, tables, props, dydt, out)
+
+
+@njit(cache=True, error_model="numpy")
+def balances(y, u, c, tables, props, dydt, out):
+    """:func:`evaluate` given the cell properties ``props`` of every cell."""
+    at = c.layout
+    n = at.h_liquid_line - at.h_cond
+    opening, speed, T_amb, T_ind = u[0], u[1], u[2], u[3]
+    p_c = y[at.p_cond]
+    p_e = y[at.p_evap]
+    z = y[at.z]
+    cond, evap, comp = c.condenser, c.evaporator, c.compressor
+
+    # ---- cells of both zones: condenser + liquid line, evaporator + vapour line + tank
+    nc = n + 1
+    ne = n + 2
+    h_zc = y[at.h_cond : at.h_cond + nc]
+    h_ze = y[at.h_evap : at.h_evap + ne]
+    volumes = cell_volumes(c)
+    vol_c = volumes[:nc]
+    vol_e = volumes[nc:]
+    T_c = props[0, :nc]
+    rho_c = props[1, :nc]
+    rp_c = props[2, :nc]
+    rh_c = props[3, :nc]
+    x_c = props[4, :nc]
+    T_e = props[0, nc:]
+    rho_e = props[1, nc:]
+    rp_e = props[2, nc:]
+    rh_e = props[3, nc:]
+    x_e = props[4, nc:]
+    mass = stored_mass(volumes, props[1])
+    if not math.isfinite(mass):
+        out[:] = np.nan
+        dydt[:] = np.nan
+        return False
+    rho_mean_c = stored_mass(vol_c[:n], rho_c) / (n * cond.cell_volume)
+    rho_mean_e = stored_mass(vol_e[:n], rho_e) / (n * evap.cell_volume)
+
+    # ---- suction tank, suction pressure, compressor
+    h_vap_e = saturation_state(tables, p_e)[2]
+    h_suc = tank_outlet_enthalpy(h_ze[n + 1], h_vap_e, TANK_WIDTH)
+    rho_out = state(tables, p_e, h_suc)[1]
+    eta_guess = volumetric_efficiency(p_c / p_e, comp.clearance, comp.exponent, comp.cf_vol)
+    speed = speed * protection_speed_factor(p_c, comp.p_protection_start, comp.p_protection_stop)
+    m_guess = eta_guess * rho_out * comp.displacement * speed
+    dp_suction = pressure_drop(evap.friction, m_guess, rho_mean_e, FLOW_EPS) + pressure_drop(
+        c.vapor_line.friction, m_guess, rho_out, FLOW_EPS
+    )
+    p_s = p_e - dp_suction
+    T_s, rho_s = state(tables, p_s, h_suc)[:2]
+    p_d = p_c + pressure_drop(cond.friction, m_guess, rho_mean_c, FLOW_EPS)
+    m_comp, h_d, w_comp, w_ref = compressor(tables, p_s, h_suc, rho_s, p_d, speed, T_amb, comp)
+    T_d = state(tables, p_d, h_d)[0]
+    if not (math.isfinite(T_d) and math.isfinite(T_s)):
+        out[:] = np.nan
+        dydt[:] = np.nan
+        return False
+
+    # ---- valve and charge controller
+    m_valve = valve_mass_flow(
+        opening,
+        c.valve.flow_area,
+        c.valve.cf_lev,
+        rho_c[n],
+        p_c - p_e,
+        c.liquid_line.friction,
+        DP_REG,
+    )
+    error = c.controller.m0 - mass
+    m_src = c.controller.kp * error + c.controller.ki * z
+
+    # ---- walls and air: outdoor air over the condenser, indoor air over the evaporator
+    T_air_c = air_inlet_temperature(T_amb, cond.fan_power, n * cond.air_capacity)
+    T_air_e = air_inlet_temperature(T_ind, evap.fan_power, n * evap.air_capacity)
+    src_c = np.zeros(nc)
+    src_e = np.zeros(ne)
+    q_cond = 0.0
+    q_evap = 0.0
+    flow_c = abs(m_comp) / cond.nominal_mass_flow
+    flow_e = abs(m_valve) / evap.nominal_mass_flow
+    for i in range(n):
+        tw = y[at.Tw_cond + i]
+        alpha = refrigerant_htc(x_c[i], cond.htc_liquid, cond.htc_two_phase, cond.htc_vapor, flow_c)
+        q_ref = wall_heat(alpha, cond.refrigerant_area, tw, T_c[i])
+        q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
+        dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
+        src_c[i] = q_ref
+        q_cond -= q_ref
+        tw = y[at.Tw_evap + i]
+        alpha = refrigerant_htc(x_e[i], evap.htc_liquid, evap.htc_two_phase, evap.htc_vapor, flow_e)
+        q_ref = wall_heat(alpha, evap.refrigerant_area, tw, T_e[i])
+        q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
+        dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
+        src_e[i] = q_ref
+        q_evap += q_ref
+
+    # ---- refrigerant zones
+    src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
+    src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[n] - h_ze[0])
+    src_e[n + 1] -= m_comp * (h_suc - h_ze[n + 1])
+    dp_c = zone_derivatives(
+        vol_c,
+        rho_c,
+        rp_c,
+        rh_c,
+        h_zc,
+        src_c,
+        m_comp + m_src,
+        m_valve,
+        FLOW_EPS,
+        dydt[at.h_cond : at.h_cond + nc],
+    )
+    dp_e = zone_derivatives(
+        vol_e,
+        rho_e,
+        rp_e,
+        rh_e,
+        h_ze,
+        src_e,
+        m_valve,
+        m_comp,
+        FLOW_EPS,
+        dydt[at.h_evap : at.h_evap + ne],
+    )
+    dydt[at.p_cond] = dp_c
+    dydt[at.p_evap] = dp_e
+    dydt[at.z] = error
+
+    # ---- outputs and diagnostics, in the order of OUTPUT_INFO and DIAGNOSTIC_INFO
+    out[0] = T_d
+    out[1] = p_d
+    out[2] = T_s
+    out[3] = p_s
+    out[4] = T_c[n - 1]
+    out[5] = p_c
+    out[6] = T_e[n - 1]
+    out[7] = p_e
+    out[8] = m_comp
+    out[9] = q_cond
+    out[10] = q_evap
+    out[11] = w_comp
+    out[12] = w_ref
+    out[13] = cond.fan_power + evap.fan_power
+    out[14] = mass
+    out[15] = m_src
+    out[16] = m_valve
+    return bool(np.isfinite(dydt).all())
+
+
+@njit(cache=True, error_model="numpy")
+def jacobian(y, u, constants, tables, f0):
+    """Dense forward-difference Jacobian ∂f/∂y at ``y`` (``f0`` = f(y)); each column
+    re-evaluates only the cell properties its variable touches."""
+    c = constants[0]
+    zones = c.layout.zones
+    jac = np.empty((y.size, y.size))
+    props = np.empty((N_PROPERTIES, zones[:, 1].sum()))
+    cell_properties(y, zones, tables, props)
+    saved = props.copy()
+    work = y.copy()
+    dydt = np.empty(y.size)
+    out = np.empty(N_EVAL)
+    for j in range(y.size):
+        step = perturb(y, work, j, zones, tables, props)
+        balances(work, u, c, tables, props, dydt, out)
+        for i in range(y.size):
+            jac[i, j] = (dydt[i] - f0[i]) / step
+        restore(y, work, j, zones, props, saved)
+    return jac
+
+
+@njit(cache=True, error_model="numpy")
+def outputs_along(ys, us, constants, tables):
+    """Outputs and diagnostics at each row of states ``ys`` with the matching inputs ``us``."""
+    result = np.empty((ys.shape[0], N_EVAL))
+    dydt = np.empty(ys.shape[1])
+    out = np.empty(N_EVAL)
+    for k in range(ys.shape[0]):
+        evaluate(ys[k], us[k], constants, tables, dydt, out)
+        result[k] = out
+    return result
+
+
+@njit(cache=True, error_model="numpy")
+def total_mass(y, constants, tables):
+    """Total refrigerant mass M(y), kg (NaN if a property left the tables). Summed coil cell by
+    coil cell, then the lines and the tank: the order the regression reference was made with."""
+    c = constants[0]
+    at = c.layout
+    n = at.h_liquid_line - at.h_cond
+    p_c, p_e = y[at.p_cond], y[at.p_evap]
+    mass = 0.0
+    for i in range(n):
+        mass += c.condenser.cell_volume * cell_state(tables, p_c, y[at.h_cond + i])[1]
+        mass += c.evaporator.cell_volume * cell_state(tables, p_e, y[at.h_evap + i])[1]
+    mass += c.liquid_line.volume * cell_state(tables, p_c, y[at.h_liquid_line])[1]
+    mass += c.vapor_line.volume * cell_state(tables, p_e, y[at.h_vapor_line])[1]
+    mass += c.tank_volume * cell_state(tables, p_e, y[at.h_tank])[1]
+    return mass
+
+
+@njit(cache=True, error_model="numpy")
+def _quality_enthalpy(tables, p, x):
+    sat = saturation_state(tables, p)
+    return sat[1] + x * (sat[2] - sat[1])
+
+
+@njit(cache=True, error_model="numpy")
+def filled_state(s, p_c, p_e, constants, tables):
+    """A running-cycle state at pressures p_c, p_e whose charge grows monotonically with the fill
+    level ``s`` in [-1, 2]: s < 0 leaves the condenser outlet and liquid line two-phase (up to
+    quality 0.3), s in [0, 1] moves the end of condensation from the outlet to a fifth of the
+    coil, s > 1 fills the suction tank with liquid. Walls start at the fluid temperature."""
+    at = constants[0].layout
+    n = at.h_liquid_line - at.h_cond
+    y = np.zeros(at.size)
+    x_end = -0.08 + 0.38 * max(-s, 0.0)
+    reach = 1.0 - 0.8 * min(max(s, 0.0), 1.0)
+    y[at.p_cond] = p_c
+    for i in range(n):
+        xi = (i + 0.5) / n
+        x = max(1.05 - (1.05 - x_end) * xi / reach, x_end)
+        y[at.h_cond + i] = _quality_enthalpy(tables, p_c, x)
+        y[at.Tw_cond + i] = state(tables, p_c, y[at.h_cond + i])[0]
+    y[at.h_liquid_line] = _quality_enthalpy(tables, p_c, x_end)
+    y[at.p_evap] = p_e
+    sat_e = saturation_state(tables, p_e)
+    x_in = (y[at.h_liquid_line] - sat_e[1]) / (sat_e[2] - sat_e[1])
+    for i in range(n):
+        xi = (i + 0.5) / n
+        y[at.h_evap + i] = _quality_enthalpy(tables, p_e, x_in + (1.05 - x_in) * xi)
+        y[at.Tw_evap + i] = state(tables, p_e, y[at.h_evap + i])[0]
+    y[at.h_vapor_line] = _quality_enthalpy(tables, p_e, 1.05)
+    y[at.h_tank] = _quality_enthalpy(tables, p_e, 1.05 - 1.1 * min(max(s - 1.0, 0.0), 1.0))
+    return y
+
+
+class SplitCooling(CycleModel):
+    """The built-in 3.5 kW split air conditioner in cooling mode."""
+
+    name = "split-cooling"
+    description = "split air conditioner, cooling: outdoor coil condenses, indoor evaporates"
+    parameters = PARAMETERS
+    output_info = OUTPUT_INFO
+    diagnostic_info = DIAGNOSTIC_INFO
+    capacity = "Q_evap"
+    evaluate = staticmethod(evaluate)
+    jacobian = staticmethod(jacobian)
+    outputs_along = staticmethod(outputs_along)
+    total_mass = staticmethod(total_mass)
+
+    def layout(self, n_volumes: int) -> StateLayout:
+        return layout(n_volumes)
+
+    def constants(
+        self, unit: Unit, theta: np.ndarray, controller: bool | None = None
+    ) -> np.ndarray:
+        n = unit.discretisation.n_volumes
+        return split_unit_constants(unit, theta, layout(n), controller, condenser_fan="outdoor")
+
+    def initial_state(
+        self, c: np.ndarray, n_volumes: int, inputs: np.ndarray, tables
+    ) -> np.ndarray:
+        """The paper's initialisation by M0 alone: condensing 12 K above the outdoor air,
+        evaporating 18 K below the indoor air, the fill level of :func:`filled_state` found
+        by bisection on the total mass."""
+        p_c = p_sat_from_T(tables, inputs[2] + 12.0)
+        p_e = p_sat_from_T(tables, inputs[3] - 18.0)
+        return place_charge(
+            lambda s: filled_state(s, p_c, p_e, c, tables),
+            lambda y: total_mass(y, c, tables),
+            self.charge(c),
+        )
