@@ -12,7 +12,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from pymc_vcc.physics.cycle import OUTPUT_INFO
+from pymc_vcc.physics.cycles import OUTPUT_INFO
 
 PLAUSIBLE_SI: dict[str, tuple[float, float]] = {
     "Pa": (3e4, 7e6),  # refrigerant pressure: 0.3 to 70 bar absolute

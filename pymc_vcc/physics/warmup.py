@@ -19,15 +19,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.physics.cycle import (
-    N_EVAL,
-    build_constants,
-    evaluate,
-    initial_state,
-    jacobian,
-    n_states,
-    outputs_along,
-)
+from pymc_vcc.physics.cycles import CycleModel
 from pymc_vcc.physics.inputs import INPUT_IDS
 from pymc_vcc.physics.unit import Unit
 
@@ -37,7 +29,7 @@ ANNOUNCE_AFTER_SECONDS = 2.0
 TYPICAL_COMPILE_SECONDS = 90
 """A cold compile of the cycle model: 62 and 99 s measured on a busy 2-core machine, s."""
 
-_READY: set[tuple[str, int]] = set()  # (refrigerant, cells per heat exchanger) warmed up here
+_READY: set[tuple[str, str, int]] = set()  # (cycle, refrigerant, cells per heat exchanger)
 
 
 def _announce() -> None:
@@ -49,10 +41,10 @@ def _announce() -> None:
     )
 
 
-def _is_cached() -> bool:
-    """Whether Numba's disk cache holds the cycle kernels (then they load, not compile)."""
+def _is_cached(model: CycleModel) -> bool:
+    """Whether Numba's disk cache holds the cycle's kernels (then they load, not compile)."""
     try:
-        return Path(evaluate._cache._cache_file._index_path).exists()
+        return Path(model.evaluate._cache._cache_file._index_path).exists()
     except AttributeError:  # Numba internals changed: assume a compile
         return False
 
@@ -62,25 +54,26 @@ def _run_kernels(unit: Unit) -> None:
     from pymc_vcc.physics.refrigerant import load_refrigerant
 
     tables = load_refrigerant(unit.refrigerant).tables
+    model = unit.cycle_model
     n = unit.discretisation.n_volumes
     u = np.array([getattr(unit.rating, name) for name in INPUT_IDS])
-    c = build_constants(unit, unit.parameters.nominal)
-    y = initial_state(c, n, unit.rating.T_ambient, unit.rating.T_indoor, tables)
-    dydt = np.empty(n_states(n))
-    evaluate(y, u, c, tables, dydt, np.empty(N_EVAL))
-    jacobian(y, u, c, tables, dydt.copy())
-    outputs_along(y[np.newaxis, :], u[np.newaxis, :], c, tables)
+    c = model.constants(unit, unit.parameters.nominal)
+    y = model.initial_state(c, n, u, tables)
+    dydt = np.empty(y.size)
+    model.evaluate(y, u, c, tables, dydt, np.empty(model.n_eval))
+    model.jacobian(y, u, c, tables, dydt.copy())
+    model.outputs_along(y[np.newaxis, :], u[np.newaxis, :], c, tables)
     xr.Dataset({"y": ("time", y)})  # xarray imports its array backends on first use (seconds)
 
 
 def ensure_compiled(unit: Unit) -> None:
     """Load ``unit``'s refrigerant tables and compile (or load) the cycle kernels, once."""
-    key = (unit.refrigerant, unit.discretisation.n_volumes)
+    key = (unit.cycle_model.name, unit.refrigerant, unit.discretisation.n_volumes)
     if key in _READY:
         return
     timer = threading.Timer(ANNOUNCE_AFTER_SECONDS, _announce)
     timer.daemon = True
-    if multiprocessing.parent_process() is None and not _is_cached():
+    if multiprocessing.parent_process() is None and not _is_cached(unit.cycle_model):
         timer.start()
     try:
         _run_kernels(unit)
