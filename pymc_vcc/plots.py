@@ -16,6 +16,8 @@ import xarray as xr
 from matplotlib.figure import Figure
 from scipy.stats import gaussian_kde
 
+from pymc_vcc.execution.output_folder import atomic_path
+
 _DISPLAY_UNITS = {
     "K": ("°C", lambda v: v - 273.15),
     "Pa": ("bar", lambda v: v / 1e5),
@@ -35,7 +37,8 @@ def save_figure(figure: Figure, path_stem: str | Path) -> list[Path]:
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = [stem.with_suffix(".png"), stem.with_suffix(".svg")]
     for path in paths:
-        figure.savefig(path, dpi=150, bbox_inches="tight")
+        with atomic_path(path) as partial:  # a kill while writing never leaves half a figure
+            figure.savefig(partial, dpi=150, bbox_inches="tight")
     plt.close(figure)
     return paths
 

@@ -234,10 +234,13 @@ class WorkerPool:
         jobs = worker.jobs
         new = self._start_worker()
         worker.process, worker.connection, worker.jobs = new.process, new.connection, deque()
-        if jobs:
+        now = time.perf_counter()
+        if stopped is not None and jobs and jobs[0].overdue(now) < 0:
+            jobs[0].loaded = False  # the overdue chunk finished as it was stopped: rerun the next
+            self._queue.extendleft(reversed(jobs))
+        elif jobs:
             running = jobs.popleft()
-            elapsed = time.perf_counter() - running.started
-            crash = WorkerCrash(reason, elapsed) if stopped is None else stopped
+            crash = WorkerCrash(reason, now - running.started) if stopped is None else stopped
             running.future.set_exception(WorkerDiedError(crash))
             self._queue.extendleft(reversed(jobs))  # never started: queued again, first
 

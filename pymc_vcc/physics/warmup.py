@@ -26,16 +26,17 @@ from pymc_vcc.physics.unit import Unit
 ANNOUNCE_AFTER_SECONDS = 2.0
 """A warm-up still running after this long is a first compile: say so on screen, s."""
 
-TYPICAL_COMPILE_SECONDS = 90
-"""A cold compile of the cycle model: 62 and 99 s measured on a busy 2-core machine, s."""
+TYPICAL_COMPILE_SECONDS = 40
+"""CPU time of a cold compile of the cycle model, s (37 s measured; the wall time grows with
+the machine's load: 62 to 500 s on a shared 2-core machine)."""
 
 _READY: set[tuple[str, str, int]] = set()  # (cycle, refrigerant, cells per heat exchanger)
 
 
 def _announce() -> None:
     print(
-        f"compiling the cycle model, once: ~{TYPICAL_COMPILE_SECONDS} s "
-        "(Numba; later runs load it from its cache)",
+        f"compiling the cycle model, once: ~{TYPICAL_COMPILE_SECONDS} s on an idle core, "
+        "longer on a busy machine (Numba; later runs load it from its cache)",
         file=sys.stderr,
         flush=True,
     )
