@@ -24,6 +24,7 @@ from numba import njit
 
 from pymc_vcc.physics.components.density import cell_state
 from pymc_vcc.physics.records import make_record
+from pymc_vcc.physics.refrigerant import saturation_state
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import SolverSettings, Unit
@@ -289,3 +290,11 @@ def restore(y, work, j, zones, props, saved):
         for k in range(N_PROPERTIES):
             props[k, i] = saved[k, i]
     work[j] = y[j]
+
+
+@njit(cache=True, error_model="numpy")
+def quality_enthalpy(tables, p, x):
+    """Enthalpy at pressure ``p`` (Pa) and quality ``x`` (J/kg), extended linearly beyond the
+    saturation lines for x < 0 or x > 1: the initial states' fill profiles use it."""
+    sat = saturation_state(tables, p)
+    return sat[1] + x * (sat[2] - sat[1])

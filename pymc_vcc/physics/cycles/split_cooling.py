@@ -42,6 +42,7 @@ from pymc_vcc.physics.cycles.base import (
     cell_properties,
     perturb,
     place_charge,
+    quality_enthalpy,
     restore,
     stored_mass,
 )
@@ -307,12 +308,6 @@ def total_mass(y, constants, tables):
 
 
 @njit(cache=True, error_model="numpy")
-def _quality_enthalpy(tables, p, x):
-    sat = saturation_state(tables, p)
-    return sat[1] + x * (sat[2] - sat[1])
-
-
-@njit(cache=True, error_model="numpy")
 def filled_state(s, p_c, p_e, constants, tables):
     """A running-cycle state at pressures p_c, p_e whose charge grows monotonically with the fill
     level ``s`` in [-1, 2]: s < 0 leaves the condenser outlet and liquid line two-phase (up to
@@ -327,18 +322,18 @@ def filled_state(s, p_c, p_e, constants, tables):
     for i in range(n):
         xi = (i + 0.5) / n
         x = max(1.05 - (1.05 - x_end) * xi / reach, x_end)
-        y[at.h_cond + i] = _quality_enthalpy(tables, p_c, x)
+        y[at.h_cond + i] = quality_enthalpy(tables, p_c, x)
         y[at.Tw_cond + i] = state(tables, p_c, y[at.h_cond + i])[0]
-    y[at.h_liquid_line] = _quality_enthalpy(tables, p_c, x_end)
+    y[at.h_liquid_line] = quality_enthalpy(tables, p_c, x_end)
     y[at.p_evap] = p_e
     sat_e = saturation_state(tables, p_e)
     x_in = (y[at.h_liquid_line] - sat_e[1]) / (sat_e[2] - sat_e[1])
     for i in range(n):
         xi = (i + 0.5) / n
-        y[at.h_evap + i] = _quality_enthalpy(tables, p_e, x_in + (1.05 - x_in) * xi)
+        y[at.h_evap + i] = quality_enthalpy(tables, p_e, x_in + (1.05 - x_in) * xi)
         y[at.Tw_evap + i] = state(tables, p_e, y[at.h_evap + i])[0]
-    y[at.h_vapor_line] = _quality_enthalpy(tables, p_e, 1.05)
-    y[at.h_tank] = _quality_enthalpy(tables, p_e, 1.05 - 1.1 * min(max(s - 1.0, 0.0), 1.0))
+    y[at.h_vapor_line] = quality_enthalpy(tables, p_e, 1.05)
+    y[at.h_tank] = quality_enthalpy(tables, p_e, 1.05 - 1.1 * min(max(s - 1.0, 0.0), 1.0))
     return y
 
 
