@@ -1,4 +1,5 @@
-"""Simulation driver: scipy's Radau, step by step, restarted at every input step.
+"""Simulation driver: a stiff solver (scipy's Radau or SUNDIALS CVODE), restarted at every input
+step.
 
 :func:`simulate` never raises for a run that goes wrong: it returns the output Dataset flagged
 ``status = "failed"`` with a ``failure_reason`` (solver failure, non-finite state, property out of
@@ -14,8 +15,6 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 import xarray as xr
-from scipy.integrate import Radau
-from scipy.linalg import get_lapack_funcs
 from threadpoolctl import ThreadpoolController
 
 from pymc_vcc.physics.cycle import (
@@ -39,6 +38,7 @@ from pymc_vcc.physics.inputs import (
     validate_inputs,
     window,
 )
+from pymc_vcc.physics.solvers import METHODS, make_solver
 from pymc_vcc.physics.unit import Unit, load_unit
 
 
@@ -52,10 +52,6 @@ def _fluid(name: str):
 @functools.lru_cache(maxsize=1)
 def _builtin_unit() -> Unit:
     return load_unit()
-
-
-class _WallClockLimit(Exception):
-    """Raised from inside a solver step when the run exceeds its wall-clock limit."""
 
 
 _THREADPOOLS = ThreadpoolController()
@@ -93,6 +89,7 @@ def simulate(
     controller: bool | None = None,
     diagnostics: bool = False,
     max_wall_time: float | None = None,
+    solver: str | None = None,
 ) -> xr.Dataset:
     """Simulate the cycle and return the nine outputs on a regular time grid.
 
@@ -115,14 +112,17 @@ def simulate(
         Also return heats, powers, total mass and controller source (see ``DIAGNOSTIC_INFO``).
     max_wall_time
         Wall-clock limit in s (default: the unit's ``solver.max_wall_time``).
+    solver
+        ``"radau"`` (scipy, the reference) or ``"cvode"`` (SUNDIALS, faster) (default: the
+        unit's ``solver.method``), see :mod:`pymc_vcc.physics.solvers`.
 
     Returns
     -------
     xarray.Dataset
         Variables ``TD, PD, TS, PS, TC, PC, TE, PE, MDOT`` over ``time`` with ``units`` attrs;
-        attrs ``status`` ("ok" | "failed"), ``failure_reason``, ``n_rhs``, ``n_jac``,
-        ``n_steps``, ``wall_time`` (s), ``mass_error`` (max |M - M0|/M0 on the grid),
-        ``source_integral`` (∫|ṁ_src| dt, kg).
+        attrs ``status`` ("ok" | "failed"), ``failure_reason``, ``solver``, ``n_rhs``,
+        ``n_jac``, ``n_steps`` (-1 for cvode), ``wall_time`` (s), ``mass_error`` (max |M - M0|/M0
+        on the grid), ``source_integral`` (∫|ṁ_src| dt, kg).
     """
     started = time.perf_counter()
     unit = _builtin_unit() if unit is None else unit
@@ -135,6 +135,9 @@ def simulate(
     if not dt > 0:
         raise ValueError(f"output_interval must be positive, got {dt}")
     limit = unit.solver.max_wall_time if max_wall_time is None else float(max_wall_time)
+    method = unit.solver.method if solver is None else solver
+    if method not in METHODS:
+        raise ValueError(f"solver must be one of {list(METHODS)}, got {method!r}")
 
     edges, held = input_segments(inputs)
     times = np.arange(0.0, edges[-1] + 1e-9 * edges[-1], dt)
@@ -147,7 +150,7 @@ def simulate(
     controls = np.empty((times.size, len(INPUT_IDS)))
     segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
     controls[:] = held[segment_of]
-    stats = {"n_rhs": 0, "n_jac": 0, "n_steps": 0, "bad_rhs": 0}
+    stepper = make_solver(method, unit.solver.rtol, atol, unit.solver.max_step, limit)
     reason = ""
     try:
         y = initial_state(c, n, held[0][2], held[0][3], tables)
@@ -156,9 +159,7 @@ def simulate(
         reason = f"initial state: {error}"
     if y is not None:
         with _THREADPOOLS.limit(limits=1, user_api="blas"):
-            reason = _integrate(
-                y, c, tables, edges, held, times, states, atol, unit, limit, started, stats
-            )
+            reason = _integrate(y, c, tables, edges, held, times, states, stepper, started + limit)
 
     values = _empty_result(times, diagnostics)
     done = np.isfinite(states).all(axis=1)
@@ -186,9 +187,10 @@ def simulate(
         attrs={
             "status": "failed" if reason else "ok",
             "failure_reason": reason,
-            "n_rhs": stats["n_rhs"],
-            "n_jac": stats["n_jac"],
-            "n_steps": stats["n_steps"],
+            "n_rhs": stepper.counters.n_rhs,
+            "n_jac": stepper.counters.n_jac,
+            "n_steps": stepper.counters.n_steps,
+            "solver": method,
             "n_states": n_states(n),
             "wall_time": time.perf_counter() - started,
             "mass_error": mass_error,
@@ -199,29 +201,19 @@ def simulate(
     return dataset
 
 
-def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, started, stats):
+def _integrate(y, c, tables, edges, held, times, states, solver, deadline):
     """Fill ``states`` on ``times`` segment by segment; return a failure reason or ""."""
     dydt = np.empty(y.size)
     out = np.empty(N_EVAL)
-    solver_settings = unit.solver
     for k, u in enumerate(held):
         t0, t1 = float(edges[k]), float(edges[k + 1])
         last = k == len(held) - 1
 
-        def fun(t, state, u=u):
-            stats["n_rhs"] += 1
-            if not evaluate(state, u, c, tables, dydt, out):
-                stats["bad_rhs"] += 1
-            if time.perf_counter() - started > limit:  # also stops a step that never ends
-                raise _WallClockLimit
-            return dydt.copy()
+        def rhs(state, derivative, u=u):
+            return evaluate(state, u, c, tables, derivative, out)
 
-        def jac(t, state, u=u):
-            stats["n_jac"] += 1
-            evaluate(state, u, c, tables, dydt, out)
-            matrix = jacobian(state, u, c, tables, dydt.copy())
-            # columns that left the property tables: let the step-size control back off
-            return np.nan_to_num(matrix, nan=0.0, posinf=0.0, neginf=0.0)
+        def jac(state, f, u=u):
+            return jacobian(state, u, c, tables, f)
 
         in_segment = (times >= t0) & ((times < t1) | (last & (times <= t1)))
         pending = np.flatnonzero(in_segment)
@@ -230,71 +222,12 @@ def _integrate(y, c, tables, edges, held, times, states, atol, unit, limit, star
             pending = pending[1:]
         if not evaluate(y, u, c, tables, dydt, out):
             return f"right-hand side not finite at t = {t0:.1f} s (property out of range)"
-        try:
-            solver = Radau(
-                fun,
-                t0,
-                y,
-                t1,
-                rtol=solver_settings.rtol,
-                atol=atol,
-                jac=jac,
-                max_step=solver_settings.max_step,
-            )
-        except _WallClockLimit:
-            return f"wall-clock limit of {limit:.1f} s reached at t = {t0:.1f} s"
-        except Exception as error:
-            return f"solver start at t = {t0:.1f} s: {type(error).__name__}: {error}"
-        _use_direct_lapack(solver)
-        while solver.status == "running":
-            try:
-                message = solver.step()
-            except _WallClockLimit:
-                return f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s"
-            except Exception as error:
-                return f"solver failure at t = {solver.t:.2f} s: {type(error).__name__}: {error}"
-            stats["n_steps"] += 1
-            if solver.status == "failed":
-                why = message or "Radau failed"
-                if stats["bad_rhs"]:
-                    why += f" (property out of range in {stats['bad_rhs']} evaluations)"
-                return f"solver failure at t = {solver.t:.2f} s: {why}"
-            if not np.isfinite(solver.y).all():
-                return f"non-finite state at t = {solver.t:.2f} s"
-            if pending.size:
-                ready = pending[times[pending] <= solver.t]
-                if ready.size:
-                    states[ready] = solver.dense_output()(times[ready]).T
-                    pending = pending[ready.size :]
-            if time.perf_counter() - started > limit:
-                return f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s"
-        y = solver.y
+        filled = np.full((pending.size, y.size), np.nan)
+        y, reason = solver.integrate(rhs, jac, y, t0, t1, times[pending], filled, deadline)
+        states[pending] = filled
+        if reason:
+            return reason
     return ""
-
-
-_LAPACK_REAL = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1),))
-_LAPACK_COMPLEX = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1, dtype=complex),))
-
-
-def _use_direct_lapack(solver: Radau) -> None:
-    """Give scipy's Radau direct LAPACK getrf/getrs for its dense LU work.
-
-    Same factorisations as ``scipy.linalg.lu_factor``/``lu_solve`` without their per-call
-    argument checking, which costs more than the 46 x 46 factorisation itself.
-    """
-
-    def lu(matrix):
-        solver.nlu += 1
-        getrf, getrs = _LAPACK_COMPLEX if np.iscomplexobj(matrix) else _LAPACK_REAL
-        factors, pivots, _ = getrf(matrix, overwrite_a=True)
-        return factors, pivots, getrs
-
-    def solve_lu(decomposition, rhs):
-        factors, pivots, getrs = decomposition
-        return getrs(factors, pivots, rhs)[0]
-
-    solver.lu = lu
-    solver.solve_lu = solve_lu
 
 
 class VCCSimulator:
@@ -305,6 +238,7 @@ class VCCSimulator:
     raised. ``outputs`` selects output ids; ``t_window = (t_start, t_end)`` simulates up to
     ``t_end`` and returns the outputs from ``t_start`` on. ``parameters`` names the ids a
     sampler calibrates (default: all 26); the others stay at nominal, or at ``fixed`` values.
+    ``solver`` picks the ODE solver (default: the unit's ``solver.method``).
     """
 
     def __init__(
@@ -318,6 +252,7 @@ class VCCSimulator:
         max_wall_time: float | None = None,
         parameters: Sequence[str] | None = None,
         fixed: Mapping[str, float] | None = None,
+        solver: str | None = None,
     ) -> None:
         self.unit = load_unit() if unit is None else unit
         self.inputs = builtin_inputs() if inputs is None else inputs
@@ -344,6 +279,9 @@ class VCCSimulator:
         self.t_window = (t_start, t_stop)
         self.controller = controller
         self.max_wall_time = max_wall_time
+        if solver is not None and solver not in METHODS:
+            raise ValueError(f"solver must be one of {list(METHODS)}, got {solver!r}")
+        self.solver = solver
 
     def __call__(
         self, theta: Mapping[str, float], rng: np.random.Generator | None = None
@@ -356,6 +294,7 @@ class VCCSimulator:
             t_end=self.t_window[1],
             controller=self.controller,
             max_wall_time=self.max_wall_time,
+            solver=self.solver,
         )
         result = result[list(self.output_names)]
         return result.sel(time=slice(self.t_window[0], None))
@@ -373,6 +312,7 @@ def operating_point(
     *,
     duration: float = 1500.0,
     controller: bool | None = None,
+    solver: str | None = None,
     **conditions: float,
 ) -> dict[str, float | str]:
     """The (near) steady state reached after ``duration`` s at constant inputs.
@@ -399,6 +339,7 @@ def operating_point(
         diagnostics=True,
         controller=controller,
         output_interval=10.0,
+        solver=solver,
     )
     final = {name: float(result[name].values[-1]) for name in result.data_vars}
     tables = _fluid(unit.refrigerant).tables
