@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pymc_vcc.execution.executors import EXECUTOR_KINDS
+from pymc_vcc.physics.solvers import METHODS
 
 
 def _settings(args: argparse.Namespace):
@@ -24,6 +25,7 @@ def _settings(args: argparse.Namespace):
         resume=args.resume,
         seed=args.seed,
         progress=None if not args.json else False,
+        solver=args.solver,
     )
 
 
@@ -135,6 +137,12 @@ def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -
     parser.add_argument("--out", default=out, help=f"results folder (default {out})")
     parser.add_argument("--resume", action="store_true", help="continue from checkpoints")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--solver",
+        choices=list(METHODS),
+        help="ODE solver: radau (scipy, the reference) or cvode (SUNDIALS, faster) "
+        "(default: the unit's [solver] method)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object last")
 
 

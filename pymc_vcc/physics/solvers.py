@@ -90,6 +90,10 @@ def make_solver(
     raise ValueError(f"solver method must be one of {list(METHODS)}, got {method!r}")
 
 
+_HUGE = 1e30
+"""Stands in for a non-finite derivative in CVODE, so that the step fails and is retried."""
+
+
 class _WallClockLimit(Exception):
     """Raised from inside a right-hand side when the run passes its deadline."""
 
@@ -200,8 +204,12 @@ class CvodeSolver:
     outputs come from CVODE's own interpolation in normal mode, so it never stops at them.
     """
 
-    MAX_STEPS = 100_000
-    """Internal steps allowed between two output times; the wall-clock limit governs."""
+    MAX_STEPS = 20_000
+    """Internal steps allowed between two output times (a run that needs more is stuck)."""
+
+    MIN_STEP = 1e-8
+    """Smallest step, s: a step that must be shorter fails the run (as scipy's Radau does near
+    10 ε t) instead of creeping towards a state where a property leaves its table."""
 
     def __init__(self, rtol: float, atol: np.ndarray, max_step: float, wall_limit: float):
         from sksundae.cvode import CVODE
@@ -222,6 +230,7 @@ class CvodeSolver:
             rtol=rtol * CVODE_TOLERANCE_SCALE,
             atol=atol * CVODE_TOLERANCE_SCALE,
             max_step=max_step,
+            min_step=self.MIN_STEP,
             max_num_steps=self.MAX_STEPS,
         )
 
@@ -230,7 +239,10 @@ class CvodeSolver:
         self._t = t
         self._y[:] = y
         if not self._rhs(self._y, dydt):
+            # scikit-sundae cannot pass CVODE a recoverable error, and CVODE's tests let NaN
+            # through: a huge finite derivative fails the step, which is retried shorter
             self.counters.bad_rhs += 1
+            np.nan_to_num(dydt, copy=False, nan=_HUGE, posinf=_HUGE, neginf=-_HUGE)
         if time.perf_counter() > self._deadline:
             raise _WallClockLimit
 
@@ -250,9 +262,12 @@ class CvodeSolver:
             return y0, f"wall-clock limit of {self.wall_limit:.1f} s reached at t = {self._t:.1f} s"
         except Exception as error:
             return y0, f"solver failure after t = {t0:.2f} s: {type(error).__name__}: {error}"
-        # rows after t0: the output times reached, then t1 (or, on failure, where it stopped)
-        reached = min(len(result.t) - 1 - (not result.success), t_out.size)
-        states_out[:reached] = result.y[1 : 1 + reached]
+        if tspan.size == 2:  # scikit-sundae then returns every internal step: keep t1 only
+            rows = result.y[-1:] if result.success else result.y[:0]
+        else:  # the output times reached, then t1 (on failure: where it stopped, dropped)
+            rows = result.y[1 : len(result.t) - (not result.success)]
+        reached = min(len(rows), t_out.size)
+        states_out[:reached] = rows[:reached]
         y_end = result.y[-1]
         finite = np.isfinite(result.y).all(axis=1)
         if not finite.all():

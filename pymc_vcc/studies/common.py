@@ -14,6 +14,8 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.executors import EXECUTOR_KINDS, Executor, make_executor
+from pymc_vcc.physics.solvers import METHODS
+from pymc_vcc.physics.unit import Unit, load_unit
 
 
 @dataclass(frozen=True)
@@ -72,6 +74,8 @@ class StudySettings:
         resume: continue from the checkpoints in ``out`` instead of starting afresh.
         seed: seeds the datasets' draws and every sampler.
         progress: show progress bars (default: when standard error is a terminal).
+        solver: ODE solver of every simulation, ``"radau"`` or ``"cvode"`` (default: the
+            unit's ``[solver] method``).
     """
 
     budget: str | Budget = "small"
@@ -82,9 +86,12 @@ class StudySettings:
     resume: bool = False
     seed: int = 0
     progress: bool | None = None
+    solver: str | None = None
 
     def __post_init__(self) -> None:
         get_budget(self.budget)
+        if self.solver is not None and self.solver not in METHODS:
+            raise ValueError(f"solver must be one of {list(METHODS)}, got {self.solver!r}")
         if self.executor not in EXECUTOR_KINDS:
             raise ValueError(
                 f"executor must be one of {list(EXECUTOR_KINDS)}, got {self.executor!r}"
@@ -93,6 +100,13 @@ class StudySettings:
             raise ValueError("scheduler is the address of a Dask scheduler: use executor='dask'")
         if self.out is not None:
             object.__setattr__(self, "out", Path(self.out))
+
+    def unit(self, unit: Unit | None = None) -> Unit:
+        """``unit`` (default: the built-in one) with this study's solver."""
+        unit = unit or load_unit()
+        if self.solver is None or self.solver == unit.solver.method:
+            return unit
+        return unit.with_changes(solver={"method": self.solver})
 
     @property
     def work(self) -> Budget:

@@ -22,7 +22,7 @@ from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.physics.cycle import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
-from pymc_vcc.physics.unit import Unit, load_unit
+from pymc_vcc.physics.unit import Unit
 from pymc_vcc.plots import plot_inputs, plot_predictive, plot_prior_posterior, save_figure
 from pymc_vcc.studies.common import StudySettings, write_json, write_tree
 
@@ -118,7 +118,7 @@ def estimation_study(
     """
     started = time.perf_counter()
     settings = settings or StudySettings()
-    unit = unit or load_unit()
+    unit = settings.unit(unit)
     full = VCCSimulator(unit, inputs)
     draw_seed, sampler_seed, predictive_seed = settings.seeds(3)
     rng = np.random.default_rng(draw_seed)
