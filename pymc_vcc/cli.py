@@ -118,6 +118,8 @@ def _bench(args: argparse.Namespace) -> int:
         part = module.run(quick=args.quick)
         if not args.json:
             print(f"[{name}]")
+            if hasattr(module, "format_table"):  # figures side by side (e.g. per solver)
+                print(module.format_table(part))
             for key, value in part.items():
                 print(f"  {key:32s} {value}")
         results.update(part)
