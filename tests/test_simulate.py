@@ -33,8 +33,9 @@ def rated(unit, solver):
 
 @pytest.fixture(scope="module")
 def full_runs(unit, solver):
-    on = simulate(unit, diagnostics=True, solver=solver)
-    off = simulate(unit, diagnostics=True, controller=False, solver=solver)
+    # a generous wall-clock limit: on a busy machine Radau's 2120 s can take 20 s
+    on = simulate(unit, diagnostics=True, solver=solver, max_wall_time=600.0)
+    off = simulate(unit, diagnostics=True, controller=False, solver=solver, max_wall_time=600.0)
     return on, off
 
 
