@@ -133,6 +133,7 @@ def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys
 def test_estimate_with_smc_and_cvode(tmp_path, capsys):
     out = tmp_path / "estimate"
     command = ["estimate", "--budget", "smoke", "--out", str(out), "--json", "--solver", "cvode"]
+    command += ["--executor", "serial"]
     main([*command, "--method", "smc", "--particles", "4", "--epsilon", "0.05"])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert 2 * 4 <= summary["n_simulations"] < 2 * 4 * 100
