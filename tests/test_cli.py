@@ -46,3 +46,25 @@ def test_errors_are_one_line_and_exit_2_and_debug_shows_the_traceback(tmp_path, 
     assert "no Dask scheduler answers at tcp://127.0.0.1:9" in error
     with pytest.raises(ConnectionError, match="no Dask scheduler answers"):
         main(["sobol", *dead, "--debug"])
+
+
+def test_solver_and_sampler_options():
+    args = build_parser().parse_args(
+        ["estimate", "--method", "smc", "--solver", "cvode", "--epsilon", "0.02"]
+    )
+    assert (args.method, args.solver, args.epsilon, args.particles) == ("smc", "cvode", 0.02, None)
+    assert build_parser().parse_args(["leak"]).solver is None  # the unit's own choice
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["sobol", "--solver", "euler"])
+
+
+def test_benchmark_table_puts_solvers_side_by_side():
+    from pymc_vcc.benchmarks.simulator import format_table
+
+    table = format_table(
+        {"sim_seconds_median_radau": 0.2, "sim_seconds_median_cvode": 0.05, "rhs_evals_radau": 2437}
+    )
+    header, median_row = table.splitlines()[:2]
+    assert header.split() == ["radau", "cvode"]
+    assert median_row.split() == ["sim_seconds_median", "0.2", "0.05"]
+    assert "2437" in table

@@ -61,6 +61,10 @@ def _mutated(mutate):
             r"\[unit\] cycle: unknown cycle 'chiller'; allowed cycles are",
         ),
         (lambda d: d["unit"].update(cycle=3), r"\[unit\] cycle: expected a name, got 3"),
+        (
+            lambda d: d["solver"].update(method="euler"),
+            r"\[solver\] method: expected one of \['radau', 'cvode'\], got 'euler'",
+        ),
     ],
 )
 def test_bad_unit_descriptions_are_clear_errors(mutate, message):
@@ -73,6 +77,13 @@ def test_invalid_toml_is_reported(tmp_path):
     path.write_text("[unit\nname = 1")
     with pytest.raises(ValueError, match="not valid TOML"):
         load_unit(path)
+
+
+def test_solver_method_is_optional_and_defaults_to_radau():
+    data = _builtin_dict()
+    data["solver"].pop("method")
+    assert unit_from_dict(data).solver.method == "radau"
+    assert load_unit().with_changes(solver={"method": "cvode"}).solver.method == "cvode"
 
 
 def test_with_changes_validates():

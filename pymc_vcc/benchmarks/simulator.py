@@ -1,9 +1,17 @@
-"""Speed and robustness of the dynamic cycle simulator.
+"""Speed and robustness of the dynamic cycle simulator, every ODE solver side by side.
 
-* ``sim_seconds_median``: one 1060 s simulation of the built-in profile at nominal parameters,
-  one process, median after a warm-up run;
+For each solver of :data:`~pymc_vcc.physics.solvers.METHODS` (``_<solver>`` suffix):
+
+* ``sim_seconds_median``/``_min`` (wall) and ``sim_cpu_seconds_median`` (process CPU time, steadier
+  on a shared machine): one 1060 s simulation of the built-in profile at nominal parameters, one
+  process, after a warm-up run; its ``rhs_evals``, ``jac_evals`` and ``solver_steps`` (-1: CVODE
+  does not report them);
 * ``sims_per_second`` and ``failure_rate``: 1060 s simulations of uniform draws from the Table
   III box on all cores (a process pool), with the failure kinds counted.
+
+Then ``speedup_<solver>`` (Radau's median over the solver's), ``parallel_speedup_<fastest>`` (the
+box sweep on all cores over the same sweep on one), and, unsuffixed as before, the unit's
+default solver's figures.
 """
 
 from __future__ import annotations
@@ -17,6 +25,7 @@ from statistics import median
 import numpy as np
 
 from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.solvers import METHODS
 from pymc_vcc.physics.unit import load_unit
 
 T_WINDOW = (0.0, 1060.0)
@@ -24,9 +33,9 @@ T_WINDOW = (0.0, 1060.0)
 _simulator: VCCSimulator | None = None
 
 
-def _init_worker() -> None:
+def _init_worker(solver: str) -> None:
     global _simulator
-    _simulator = VCCSimulator(t_window=T_WINDOW)
+    _simulator = VCCSimulator(t_window=T_WINDOW, solver=solver)
 
 
 def _run_draw(theta: dict[str, float]) -> str:
@@ -35,40 +44,88 @@ def _run_draw(theta: dict[str, float]) -> str:
     return _simulator(theta, None).attrs["failure_kind"]
 
 
-def run(quick: bool) -> dict[str, float | int | str]:
-    """Timings of nominal runs and a box sweep; ``quick`` uses 5 repeats and 20 draws."""
-    simulator = VCCSimulator(t_window=T_WINDOW)
+def _nominal(solver: str, repeats: int) -> dict[str, float | int]:
+    simulator = VCCSimulator(t_window=T_WINDOW, solver=solver)
     simulator({}, None)  # warm-up: compile or load the cached kernels
-    times, result = [], None
-    for _ in range(5 if quick else 7):
-        start = time.perf_counter()
+    wall, cpu, result = [], [], None
+    for _ in range(repeats):
+        start, start_cpu = time.perf_counter(), time.process_time()
         result = simulator({}, None)
-        times.append(time.perf_counter() - start)
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
     assert result is not None
     attrs = result.attrs
-
-    n_draws = 20 if quick else 200
-    draws = load_unit().parameters.sample_uniform(n_draws, np.random.default_rng(12345))
-    workers = os.cpu_count() or 1
-    context = multiprocessing.get_context("fork")
-    start = time.perf_counter()
-    with context.Pool(workers, initializer=_init_worker) as pool:
-        outcomes = pool.map(_run_draw, draws, chunksize=1)
-    elapsed = time.perf_counter() - start
-    reasons = Counter(kind for kind in outcomes if kind)
-    failures = sum(reasons.values())
     return {
-        "sim_seconds_median": median(times),
-        "sim_seconds_min": min(times),
-        "n_states": int(attrs["n_states"]),
+        "sim_seconds_median": median(wall),
+        "sim_seconds_min": min(wall),
+        "sim_cpu_seconds_median": median(cpu),
         "rhs_evals": int(attrs["n_rhs"]),
         "jac_evals": int(attrs["n_jac"]),
         "solver_steps": int(attrs["n_steps"]),
         "mass_error_nominal": float(attrs["mass_error"]),
         "source_integral_kg": float(attrs["source_integral"]),
-        "box_draws": n_draws,
-        "workers": workers,
-        "sims_per_second": n_draws / elapsed,
-        "failure_rate": failures / n_draws,
+        "n_states": int(attrs["n_states"]),
+    }
+
+
+def _sweep(solver: str, draws: list[dict[str, float]], workers: int) -> dict[str, float | str]:
+    context = multiprocessing.get_context("fork")
+    start = time.perf_counter()
+    with context.Pool(workers, initializer=_init_worker, initargs=(solver,)) as pool:
+        outcomes = pool.map(_run_draw, draws, chunksize=1)
+    elapsed = time.perf_counter() - start
+    reasons = Counter(kind for kind in outcomes if kind)
+    return {
+        "sims_per_second": len(draws) / elapsed,
+        "failure_rate": sum(reasons.values()) / len(draws),
         "failure_reasons": "; ".join(f"{count} x {kind}" for kind, count in reasons.items()),
     }
+
+
+def run(quick: bool) -> dict[str, float | int | str]:
+    """Timings of nominal runs and a box sweep per solver; ``quick``: 5 repeats, 20 draws."""
+    unit = load_unit()
+    n_draws = 20 if quick else 200
+    draws = unit.parameters.sample_uniform(n_draws, np.random.default_rng(12345))
+    workers = os.cpu_count() or 1
+    results: dict[str, float | int | str] = {"box_draws": n_draws, "workers": workers}
+    per_solver = {}
+    for solver in METHODS:
+        figures = _nominal(solver, 5 if quick else 7) | _sweep(solver, draws, workers)
+        per_solver[solver] = figures
+        results |= {f"{key}_{solver}": value for key, value in figures.items()}
+    reference = per_solver["radau"]["sim_seconds_median"]
+    for solver, figures in per_solver.items():
+        results[f"speedup_{solver}"] = reference / figures["sim_seconds_median"]
+    fastest = min(per_solver, key=lambda name: per_solver[name]["sim_seconds_median"])
+    one_core = _sweep(fastest, draws, 1)["sims_per_second"]
+    results[f"parallel_speedup_{fastest}"] = per_solver[fastest]["sims_per_second"] / one_core
+    return results | per_solver[unit.solver.method]
+
+
+SIDE_BY_SIDE = (
+    "sim_seconds_median",
+    "sim_seconds_min",
+    "sim_cpu_seconds_median",
+    "rhs_evals",
+    "jac_evals",
+    "solver_steps",
+    "sims_per_second",
+    "failure_rate",
+    "speedup",
+)
+"""Figures shown as one row per figure and one column per solver."""
+
+
+def format_table(results: dict[str, float | int | str]) -> str:
+    """The per-solver figures of ``results`` side by side (figures as rows, solvers as columns)."""
+    lines = [f"  {'':24s}" + "".join(f"{solver:>12s}" for solver in METHODS)]
+    for key in SIDE_BY_SIDE:
+        cells = [results.get(f"{key}_{solver}", "") for solver in METHODS]
+        lines.append(
+            f"  {key:24s}"
+            + "".join(
+                f"{cell:12.4g}" if isinstance(cell, float) else f"{cell!s:>12s}" for cell in cells
+            )
+        )
+    return "\n".join(lines)

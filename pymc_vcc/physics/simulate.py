@@ -1,4 +1,5 @@
-"""Simulation driver: any cycle model, scipy's Radau step by step, restarted at every input step.
+"""Simulation driver: any cycle model, a stiff solver (scipy's Radau or SUNDIALS CVODE), restarted
+at every input step.
 
 The driver knows no topology: the unit names its cycle model (:mod:`pymc_vcc.physics.cycles`),
 which supplies the state layout, tolerances, initial state, right-hand side, Jacobian and
@@ -16,8 +17,6 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 import xarray as xr
-from scipy.integrate import Radau
-from scipy.linalg import get_lapack_funcs
 from threadpoolctl import ThreadpoolController
 
 from pymc_vcc.physics.cycles.base import CycleModel
@@ -29,6 +28,7 @@ from pymc_vcc.physics.inputs import (
     validate_inputs,
     window,
 )
+from pymc_vcc.physics.solvers import METHODS, make_solver
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.physics.warmup import ensure_compiled
 
@@ -43,10 +43,6 @@ def _fluid(name: str):
 @functools.lru_cache(maxsize=1)
 def _builtin_unit() -> Unit:
     return load_unit()
-
-
-class _WallClockLimit(Exception):
-    """Raised from inside a solver step when the run exceeds its wall-clock limit."""
 
 
 _THREADPOOLS = ThreadpoolController()
@@ -70,6 +66,7 @@ def simulate(
     controller: bool | None = None,
     diagnostics: bool = False,
     max_wall_time: float | None = None,
+    solver: str | None = None,
 ) -> xr.Dataset:
     """Simulate the cycle and return the nine outputs on a regular time grid.
 
@@ -94,14 +91,17 @@ def simulate(
         ``diagnostic_info``).
     max_wall_time
         Wall-clock limit in s (default: the unit's ``solver.max_wall_time``).
+    solver
+        ``"radau"`` (scipy, the reference) or ``"cvode"`` (SUNDIALS, faster) (default: the
+        unit's ``solver.method``), see :mod:`pymc_vcc.physics.solvers`.
 
     Returns
     -------
     xarray.Dataset
         Variables ``TD, PD, TS, PS, TC, PC, TE, PE, MDOT`` over ``time`` with ``units`` attrs;
-        attrs ``status`` ("ok" | "failed"), ``failure_reason``, ``n_rhs``, ``n_jac``,
-        ``n_steps``, ``wall_time`` (s), ``mass_error`` (max |M - M0|/M0 on the grid),
-        ``source_integral`` (∫|ṁ_src| dt, kg).
+        attrs ``status`` ("ok" | "failed"), ``failure_reason``, ``solver``, ``n_rhs``,
+        ``n_jac``, ``n_steps`` (-1 for cvode), ``wall_time`` (s), ``mass_error`` (max |M - M0|/M0
+        on the grid), ``source_integral`` (∫|ṁ_src| dt, kg).
     """
     unit = _builtin_unit() if unit is None else unit
     ensure_compiled(unit)  # before the wall clock starts: compiling is not simulating
@@ -114,6 +114,9 @@ def simulate(
     if not dt > 0:
         raise ValueError(f"output_interval must be positive, got {dt}")
     limit = unit.solver.max_wall_time if max_wall_time is None else float(max_wall_time)
+    method = unit.solver.method if solver is None else solver
+    if method not in METHODS:
+        raise ValueError(f"solver must be one of {list(METHODS)}, got {method!r}")
 
     started = time.perf_counter()
     edges, held = input_segments(inputs)
@@ -129,7 +132,7 @@ def simulate(
     controls = np.empty((times.size, len(INPUT_IDS)))
     segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
     controls[:] = held[segment_of]
-    stats = {"n_rhs": 0, "n_jac": 0, "n_steps": 0, "bad_rhs": 0}
+    stepper = make_solver(method, unit.solver.rtol, atol, unit.solver.max_step, limit)
     failure: Failure | None = None
     try:
         y = model.initial_state(c, n, held[0], tables)
@@ -139,7 +142,7 @@ def simulate(
     if y is not None:
         with _THREADPOOLS.limit(limits=1, user_api="blas"):
             failure = _integrate(
-                model, y, c, tables, edges, held, times, states, atol, unit, limit, started, stats
+                model, y, c, tables, edges, held, times, states, stepper, started + limit
             )
 
     values = _empty_result(model, times, diagnostics)
@@ -171,9 +174,10 @@ def simulate(
             "status": "failed" if failure else "ok",
             "failure_kind": failure.kind.value if failure else "",
             "failure_reason": failure.detail if failure else "",
-            "n_rhs": stats["n_rhs"],
-            "n_jac": stats["n_jac"],
-            "n_steps": stats["n_steps"],
+            "n_rhs": stepper.counters.n_rhs,
+            "n_jac": stepper.counters.n_jac,
+            "n_steps": stepper.counters.n_steps,
+            "solver": method,
             "n_states": layout.size,
             "wall_time": time.perf_counter() - started,
             "mass_error": mass_error,
@@ -185,30 +189,20 @@ def simulate(
     return dataset
 
 
-def _integrate(model, y, c, tables, edges, held, times, states, atol, unit, limit, started, stats):
+def _integrate(model, y, c, tables, edges, held, times, states, solver, deadline):
     """Fill ``states`` on ``times`` segment by segment; return the :class:`Failure` or None."""
     evaluate, jacobian = model.evaluate, model.jacobian
     dydt = np.empty(y.size)
     out = np.empty(model.n_eval)
-    solver_settings = unit.solver
     for k, u in enumerate(held):
         t0, t1 = float(edges[k]), float(edges[k + 1])
         last = k == len(held) - 1
 
-        def fun(t, state, u=u):
-            stats["n_rhs"] += 1
-            if not evaluate(state, u, c, tables, dydt, out):
-                stats["bad_rhs"] += 1
-            if time.perf_counter() - started > limit:  # also stops a step that never ends
-                raise _WallClockLimit
-            return dydt.copy()
+        def rhs(state, derivative, u=u):
+            return evaluate(state, u, c, tables, derivative, out)
 
-        def jac(t, state, u=u):
-            stats["n_jac"] += 1
-            evaluate(state, u, c, tables, dydt, out)
-            matrix = jacobian(state, u, c, tables, dydt.copy())
-            # columns that left the property tables: let the step-size control back off
-            return np.nan_to_num(matrix, nan=0.0, posinf=0.0, neginf=0.0)
+        def jac(state, f, u=u):
+            return jacobian(state, u, c, tables, f)
 
         in_segment = (times >= t0) & ((times < t1) | (last & (times <= t1)))
         pending = np.flatnonzero(in_segment)
@@ -220,86 +214,12 @@ def _integrate(model, y, c, tables, edges, held, times, states, atol, unit, limi
                 FailureKind.PROPERTY_RANGE,
                 f"right-hand side not finite at t = {t0:.1f} s (property out of range)",
             )
-        try:
-            solver = Radau(
-                fun,
-                t0,
-                y,
-                t1,
-                rtol=solver_settings.rtol,
-                atol=atol,
-                jac=jac,
-                max_step=solver_settings.max_step,
-            )
-        except _WallClockLimit:
-            return Failure(
-                FailureKind.WALL_CLOCK,
-                f"wall-clock limit of {limit:.1f} s reached at t = {t0:.1f} s",
-            )
-        except Exception as error:
-            return Failure(
-                FailureKind.SOLVER,
-                f"solver start at t = {t0:.1f} s: {type(error).__name__}: {error}",
-            )
-        _use_direct_lapack(solver)
-        while solver.status == "running":
-            try:
-                message = solver.step()
-            except _WallClockLimit:
-                return Failure(
-                    FailureKind.WALL_CLOCK,
-                    f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s",
-                )
-            except Exception as error:
-                return Failure(
-                    FailureKind.SOLVER,
-                    f"solver failure at t = {solver.t:.2f} s: {type(error).__name__}: {error}",
-                )
-            stats["n_steps"] += 1
-            if solver.status == "failed":
-                why = message or "Radau failed"
-                if stats["bad_rhs"]:
-                    why += f" (property out of range in {stats['bad_rhs']} evaluations)"
-                return Failure(FailureKind.SOLVER, f"solver failure at t = {solver.t:.2f} s: {why}")
-            if not np.isfinite(solver.y).all():
-                return Failure(FailureKind.NON_FINITE, f"non-finite state at t = {solver.t:.2f} s")
-            if pending.size:
-                ready = pending[times[pending] <= solver.t]
-                if ready.size:
-                    states[ready] = solver.dense_output()(times[ready]).T
-                    pending = pending[ready.size :]
-            if time.perf_counter() - started > limit:
-                return Failure(
-                    FailureKind.WALL_CLOCK,
-                    f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s",
-                )
-        y = solver.y
+        filled = np.full((pending.size, y.size), np.nan)
+        y, failure = solver.integrate(rhs, jac, y, t0, t1, times[pending], filled, deadline)
+        states[pending] = filled
+        if failure is not None:
+            return failure
     return None
-
-
-_LAPACK_REAL = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1),))
-_LAPACK_COMPLEX = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1, dtype=complex),))
-
-
-def _use_direct_lapack(solver: Radau) -> None:
-    """Give scipy's Radau direct LAPACK getrf/getrs for its dense LU work.
-
-    Same factorisations as ``scipy.linalg.lu_factor``/``lu_solve`` without their per-call
-    argument checking, which costs more than the 46 x 46 factorisation itself.
-    """
-
-    def lu(matrix):
-        solver.nlu += 1
-        getrf, getrs = _LAPACK_COMPLEX if np.iscomplexobj(matrix) else _LAPACK_REAL
-        factors, pivots, _ = getrf(matrix, overwrite_a=True)
-        return factors, pivots, getrs
-
-    def solve_lu(decomposition, rhs):
-        factors, pivots, getrs = decomposition
-        return getrs(factors, pivots, rhs)[0]
-
-    solver.lu = lu
-    solver.solve_lu = solve_lu
 
 
 class VCCSimulator:
@@ -312,6 +232,7 @@ class VCCSimulator:
     sampler calibrates (default: all 26); the others stay at nominal, or at ``fixed`` values.
     Samplers refuse priors reaching outside the unit's parameter bounds
     (``parameter_bounds``) unless ``allow_outside_unit_bounds=True`` (extrapolation).
+    ``solver`` picks the ODE solver (default: the unit's ``solver.method``).
     """
 
     def __init__(
@@ -326,6 +247,7 @@ class VCCSimulator:
         parameters: Sequence[str] | None = None,
         fixed: Mapping[str, float] | None = None,
         allow_outside_unit_bounds: bool = False,
+        solver: str | None = None,
     ) -> None:
         self.unit = load_unit() if unit is None else unit
         self.inputs = builtin_inputs() if inputs is None else inputs
@@ -353,6 +275,9 @@ class VCCSimulator:
         self.t_window = (t_start, t_stop)
         self.controller = controller
         self.max_wall_time = max_wall_time
+        if solver is not None and solver not in METHODS:
+            raise ValueError(f"solver must be one of {list(METHODS)}, got {solver!r}")
+        self.solver = solver
         self.allow_outside_unit_bounds = allow_outside_unit_bounds
         ensure_compiled(self.unit)
 
@@ -379,6 +304,7 @@ class VCCSimulator:
             t_end=self.t_window[1],
             controller=self.controller,
             max_wall_time=self.max_wall_time,
+            solver=self.solver,
         )
         result = result[list(self.output_names)]
         return result.sel(time=slice(self.t_window[0], None))
@@ -401,6 +327,7 @@ def operating_point(
     *,
     duration: float = 1500.0,
     controller: bool | None = None,
+    solver: str | None = None,
     **conditions: float,
 ) -> dict[str, float | str]:
     """The (near) steady state reached after ``duration`` s at constant inputs.
@@ -428,6 +355,7 @@ def operating_point(
         diagnostics=True,
         controller=controller,
         output_interval=10.0,
+        solver=solver,
     )
     final = {str(name): float(result[name].values[-1]) for name in result.data_vars}
     tables = _fluid(unit.refrigerant).tables

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pymc_vcc.physics.parameters import ParameterIds, ParameterSpec, ParameterTable, parameter_table
+from pymc_vcc.physics.solvers import METHODS
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.cycles.base import CycleModel
@@ -41,7 +42,7 @@ class Discretisation:
 
 @dataclass(frozen=True)
 class SolverSettings:
-    """Radau tolerances, output grid and limits of one simulation."""
+    """Solver, tolerances, output grid and limits of one simulation."""
 
     rtol: float
     atol_pressure: float  # Pa
@@ -50,6 +51,7 @@ class SolverSettings:
     output_interval: float  # s
     max_step: float  # s
     max_wall_time: float  # s, a run taking longer is flagged failed
+    method: str = "radau"  # one of pymc_vcc.physics.solvers.METHODS
 
 
 @dataclass(frozen=True)
@@ -162,6 +164,9 @@ DEFAULT_CYCLE = "split-cooling"
 
 _HEAD_KEYS = ["name", "description", "refrigerant", "cycle"]
 
+_CHOICES: dict[tuple[str, str], tuple[str, ...]] = {("solver", "method"): METHODS}
+"""Allowed values of the text fields."""
+
 _FRACTIONS = {
     ("compressor", "clearance"),
     ("compressor", "isentropic_efficiency"),
@@ -214,11 +219,13 @@ class Unit:
         return unit_from_dict(data, source=f"{self.name} (modified)")
 
 
-def _check_keys(where: str, given: dict[str, Any], allowed: list[str]) -> None:
+def _check_keys(
+    where: str, given: dict[str, Any], allowed: list[str], optional: frozenset[str] = frozenset()
+) -> None:
     unknown = sorted(set(given) - set(allowed))
     if unknown:
         raise ValueError(f"{where}: unknown key(s) {unknown}; allowed keys are {allowed}")
-    missing = [key for key in allowed if key not in given]
+    missing = [key for key in allowed if key not in given and key not in optional]
     if missing:
         raise ValueError(f"{where}: missing value(s) for {missing}")
 
@@ -228,12 +235,16 @@ def _section(source: str, section: str, cls: type, raw: Any) -> Any:
     if not isinstance(raw, dict):
         raise ValueError(f"{where}: expected a table of values, got {type(raw).__name__}")
     names = [f.name for f in fields(cls)]
-    _check_keys(where, raw, names)
+    _check_keys(where, raw, names, frozenset(f.name for f in fields(cls) if f.default != MISSING))
     values: dict[str, Any] = {}
     for f in fields(cls):
-        value = raw[f.name]
+        value = raw.get(f.name, f.default)
         key = f"{where} {f.name}"
-        if f.type == "bool":
+        if f.type == "str":
+            if value not in _CHOICES[(section, f.name)]:
+                choices = list(_CHOICES[(section, f.name)])
+                raise ValueError(f"{key}: expected one of {choices}, got {value!r}")
+        elif f.type == "bool":
             if not isinstance(value, bool):
                 raise ValueError(f"{key}: expected true or false, got {value!r}")
         elif f.type == "int":

@@ -27,6 +27,8 @@ from pymc_vcc.execution.executors import (
     make_executor,
 )
 from pymc_vcc.execution.output_folder import OutputFolderError, atomic_path, claim_output_folder
+from pymc_vcc.physics.solvers import METHODS
+from pymc_vcc.physics.unit import Unit, load_unit
 
 T = TypeVar("T")
 
@@ -89,6 +91,8 @@ class StudySettings:
         progress: show progress bars (default: when standard error is a terminal).
         time_limit: wall-time limit of one simulation, s (None: the simulator's own limit
             only); a local worker process that overruns it is stopped and replaced.
+        solver: ODE solver of every simulation, ``"radau"`` or ``"cvode"`` (default: the
+            unit's ``[solver] method``).
     """
 
     budget: str | Budget = "small"
@@ -100,6 +104,7 @@ class StudySettings:
     seed: int = 0
     progress: bool | None = None
     time_limit: float | None = None
+    solver: str | None = None
 
     def __post_init__(self) -> None:
         get_budget(self.budget)
@@ -108,6 +113,8 @@ class StudySettings:
             raise ValueError(
                 f"time_limit must be a positive number of seconds, got {self.time_limit!r}"
             )
+        if self.solver is not None and self.solver not in METHODS:
+            raise ValueError(f"solver must be one of {list(METHODS)}, got {self.solver!r}")
         if self.executor not in EXECUTOR_KINDS:
             raise ValueError(
                 f"executor must be one of {list(EXECUTOR_KINDS)}, got {self.executor!r}"
@@ -118,6 +125,13 @@ class StudySettings:
             check_scheduler(self.scheduler)
         if self.out is not None:
             object.__setattr__(self, "out", Path(self.out))
+
+    def unit(self, unit: Unit | None = None) -> Unit:
+        """``unit`` (default: the built-in one) with this study's solver."""
+        unit = unit or load_unit()
+        if self.solver is None or self.solver == unit.solver.method:
+            return unit
+        return unit.with_changes(solver={"method": self.solver})
 
     @property
     def work(self) -> Budget:

@@ -7,6 +7,11 @@ all 26 parameters and the output-noise scales with a uniform prior, dataset 2 wi
 mixture fitted to dataset 1's posterior (Algorithm 1). Posterior predictives cover the whole
 2120 s, and dataset 2 is also simulated with dataset 1's true parameters (the uncalibrated
 model of Fig. 8).
+
+Two samplers (``method``): the paper's two-phase ABC rejection (Table I's budget), or PyMC's
+SMC-ABC on the same KS distance with a Gaussian kernel of width ε, all particles of a stage
+simulated in parallel (:func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`), which tempers
+towards the posterior instead of discarding 95 % of its simulations.
 """
 
 from __future__ import annotations
@@ -15,19 +20,27 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import pymc as pm
 import xarray as xr
 
+from pymc_vcc.execution.executors import Executor
+from pymc_vcc.inference.noise import with_noise
 from pymc_vcc.inference.predictive import sample_posterior_predictive
-from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
-from pymc_vcc.physics.unit import Unit, load_unit
+from pymc_vcc.physics.unit import Unit
 from pymc_vcc.plots import plot_inputs, plot_predictive, plot_prior_posterior, save_figure
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_netcdf
 
 SENSITIVE = ("M0", "CF_VOL", "CF_POW", "CF_PREF", "CF_LEV")
 """Parameters the paper found well identified (Fig. 5), shown first in the KDE figures."""
+
+METHODS: tuple[str, ...] = ("rejection", "smc")
+"""Samplers of the study: the paper's ABC rejection, or SMC-ABC (PyMC, parallel kernel)."""
 
 
 @dataclass
@@ -39,7 +52,7 @@ class EstimationResult:
         calibration: the sequential result (one tree and prior per dataset).
         predictive: each dataset's tree with its posterior predictive over the whole profile.
         uncalibrated: dataset 2's profile simulated with dataset 1's true parameters.
-        contraction: posterior sd / prior sd per parameter and dataset.
+        contraction: posterior sd / sd of the first (uniform) prior, per parameter and dataset.
         n_simulations: forward simulations run by the samplers.
         wall_seconds: wall time of the whole study, s.
     """
@@ -90,11 +103,62 @@ def _reference_run(unit: Unit, theta: dict[str, float], inputs: xr.Dataset) -> x
     return result
 
 
-def _sd_ratio(tree: xr.DataTree) -> dict[str, float]:
+def _sd_ratio(tree: xr.DataTree, first_prior: Prior) -> dict[str, float]:
+    """Posterior sd over the uniform prior's sd, (high - low) / √12, for every parameter."""
     return {
-        str(name): float(tree["posterior"][name].std() / tree["prior"][name].std())
-        for name in tree["posterior"].data_vars
+        name: float(tree["posterior"][name].std() * np.sqrt(12.0) / (high - low))
+        for name, (low, high) in first_prior.bounds.items()
     }
+
+
+def _n_simulations(tree: xr.DataTree) -> int:
+    stats = tree["sample_stats"]
+    if "n_simulations" in stats:  # rejection
+        return int(stats["n_simulations"])
+    return int(stats["simulations"].sum() + stats["resumed_simulations"].sum())  # SMC
+
+
+def smc_sequential_calibration(
+    simulator: VCCSimulator,
+    first_prior: Prior,
+    datasets: list[xr.Dataset],
+    *,
+    draws: int,
+    epsilon: float,
+    executor: Executor,
+    settings: StudySettings,
+    seed: np.random.SeedSequence,
+) -> SequentialResult:
+    """Algorithm 1 with SMC-ABC: each dataset's posterior, fitted by a Gaussian mixture, is the
+    next dataset's prior. Each tree also gets a ``prior`` group of ``draws`` prior draws."""
+    trees: list[xr.DataTree] = []
+    priors: list[Prior] = []
+    for k, (observed, stage_seed) in enumerate(
+        zip(datasets, seed.spawn(len(datasets)), strict=True)
+    ):
+        sampler_seed, prior_seed = (int(x) for x in stage_seed.generate_state(2))
+        prior = first_prior if k == 0 else GMMPrior.fit(trees[-1], first_prior, seed=prior_seed)
+        with pm.Model():
+            add_simulator("outputs", simulator, observed, prior=prior, epsilon=epsilon)
+            tree = sample_smc_abc(
+                draws,
+                executor=executor,
+                random_seed=sampler_seed,
+                checkpoint=settings.checkpoint(f"estimate_smc_{k}"),
+                progressbar=bool(settings.progress),
+            )
+        draws_of_prior = prior.sample(draws, np.random.default_rng(prior_seed))
+        tree["prior"] = xr.DataTree(
+            xr.Dataset(
+                {
+                    name: (("chain", "draw"), draws_of_prior[np.newaxis, :, j])
+                    for j, name in enumerate(prior.names)
+                }
+            )
+        )
+        trees.append(tree)
+        priors.append(prior)
+    return SequentialResult(trees, priors)
 
 
 @holds_output_folder("estimate")
@@ -106,6 +170,9 @@ def estimation_study(
     t_calibration: float = 1060.0,
     noise_bounds: tuple[float, float] = (0.0, 0.01),
     max_attempts: int = 5,
+    method: str = "rejection",
+    smc_epsilon: float = 0.01,
+    smc_draws: int | None = None,
 ) -> EstimationResult:
     """Sequential calibration of all 26 parameters on two simulated datasets (Figs. 5 to 8).
 
@@ -116,9 +183,14 @@ def estimation_study(
         t_calibration: end of the calibration window, s (the paper: 1060 s of 2120 s).
         noise_bounds: bounds of each output's learnable noise scale ν (relative, Algorithm 1).
         max_attempts: reference draws tried until both datasets simulate successfully.
+        method: ``"rejection"`` (the paper's, Table I's budget) or ``"smc"`` (SMC-ABC).
+        smc_epsilon: width ε of SMC-ABC's Gaussian kernel on the KS distance (in [0, 1]).
+        smc_draws: SMC particles per dataset (default: the budget's ``smc_draws``).
     """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
     started = time.perf_counter()
-    unit = unit or load_unit()
+    unit = settings.unit(unit)
     full = VCCSimulator(unit, inputs)
     draw_seed, sampler_seed, predictive_seed = settings.seeds(3)
     rng = np.random.default_rng(draw_seed)
@@ -133,17 +205,30 @@ def estimation_study(
     observed = [ref.sel(time=slice(0.0, t_calibration)) for ref in references]
     calibration_model = VCCSimulator(unit, full.inputs, t_window=(0.0, t_calibration))
     prior = UniformPrior({spec.id: (spec.low, spec.high) for spec in unit.parameters})
+    noise = dict.fromkeys(OUTPUT_IDS, noise_bounds)
     with settings.open_executor() as executor:
-        calibration = sequential_calibration(
-            calibration_model,
-            prior,
-            observed,
-            noise=dict.fromkeys(OUTPUT_IDS, noise_bounds),
-            executor=executor,
-            checkpoint=settings.checkpoint_folder("estimate"),
-            seed=sampler_seed,
-            **settings.rejection_options(),
-        )
+        if method == "smc":
+            calibration = smc_sequential_calibration(
+                calibration_model,
+                with_noise(prior, noise, OUTPUT_IDS),
+                observed,
+                draws=smc_draws or settings.work.smc_draws,
+                epsilon=smc_epsilon,
+                executor=executor,
+                settings=settings,
+                seed=sampler_seed,
+            )
+        else:
+            calibration = sequential_calibration(
+                calibration_model,
+                prior,
+                observed,
+                noise=noise,
+                executor=executor,
+                checkpoint=settings.checkpoint_folder("estimate"),
+                seed=sampler_seed,
+                **settings.rejection_options(),
+            )
         predictive = [
             sample_posterior_predictive(
                 tree,
@@ -164,8 +249,8 @@ def estimation_study(
         calibration=calibration,
         predictive=predictive,
         uncalibrated=uncalibrated,
-        contraction=[_sd_ratio(tree) for tree in calibration.trees],
-        n_simulations=sum(int(t["sample_stats"]["n_simulations"]) for t in calibration.trees),
+        contraction=[_sd_ratio(tree, prior) for tree in calibration.trees],
+        n_simulations=sum(_n_simulations(tree) for tree in calibration.trees),
         wall_seconds=time.perf_counter() - started,
     )
     if settings.out is not None:

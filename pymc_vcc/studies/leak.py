@@ -22,7 +22,7 @@ from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
-from pymc_vcc.physics.unit import Unit, load_unit
+from pymc_vcc.physics.unit import Unit
 from pymc_vcc.plots import plot_charge_posteriors, save_figure
 from pymc_vcc.studies.common import (
     StudySettings,
@@ -171,7 +171,7 @@ def leak_study(
         raise ValueError(f"sampler must be one of {list(SAMPLERS)}, got {sampler!r}")
     if not 0 < alarm_fraction <= 1:
         raise ValueError(f"alarm_fraction must be in (0, 1], got {alarm_fraction}")
-    unit = unit or load_unit()
+    unit = settings.unit(unit)
     spec = unit.parameters[CHARGE]
     outside = [m for m in references_kg if not spec.low <= m <= spec.high]
     if not references_kg or outside:

@@ -15,7 +15,7 @@ import xarray as xr
 from pymc_vcc.inference.sensitivity import sobol_indices
 from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator
-from pymc_vcc.physics.unit import Unit, load_unit
+from pymc_vcc.physics.unit import Unit
 from pymc_vcc.plots import plot_sobol_heatmap, save_figure
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_netcdf
 
@@ -63,7 +63,7 @@ def sobol_study(
 ) -> SobolResult:
     """First- and total-order Sobol indices of the nine outputs' averages over ``window`` (s)."""
     started = time.perf_counter()
-    unit = unit or load_unit()
+    unit = settings.unit(unit)
     simulator = VCCSimulator(unit, inputs, t_window=(0.0, window[1]))
     bounds = {spec.id: (spec.low, spec.high) for spec in unit.parameters}
     with settings.open_executor() as executor:
