@@ -8,6 +8,7 @@ import pytest
 from scipy.linalg import expm
 
 from pymc_vcc.physics.cycles import OUTPUT_IDS
+from pymc_vcc.physics.failures import FailureKind
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
 from pymc_vcc.physics.solvers import METHODS, make_solver
 from pymc_vcc.physics.unit import load_unit
@@ -35,10 +36,10 @@ def test_linear_problem_matches_the_matrix_exponential(method):
     solver = _solver(method)
     t_out = np.linspace(0.5, 20.0, 40)
     states = np.full((t_out.size, 3), np.nan)
-    y_end, reason = solver.integrate(
+    y_end, failure = solver.integrate(
         linear_rhs, linear_jac, Y0, 0.0, 20.0, t_out, states, time.perf_counter() + 10.0
     )
-    assert reason == ""
+    assert failure is None
     exact = np.array([expm(A * t) @ Y0 for t in t_out])
     np.testing.assert_allclose(states, exact, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(y_end, exact[-1], rtol=1e-4, atol=1e-6)
@@ -48,21 +49,22 @@ def test_linear_problem_matches_the_matrix_exponential(method):
     # a second segment continues from the first, counters add up
     n_rhs = counters.n_rhs
     later = np.full((1, 3), np.nan)
-    _, reason = solver.integrate(
+    _, failure = solver.integrate(
         linear_rhs, linear_jac, y_end, 20.0, 30.0, np.array([30.0]), later, time.perf_counter() + 10
     )
-    assert reason == "" and solver.counters.n_rhs > n_rhs
+    assert failure is None and solver.counters.n_rhs > n_rhs
     np.testing.assert_allclose(later[0], expm(A * 30.0) @ Y0, rtol=1e-4, atol=1e-6)
 
 
 @pytest.mark.parametrize("method", METHODS)
-def test_failures_come_back_as_reasons(method):
+def test_failures_come_back_with_their_kind(method):
     t_out = np.array([1.0, 2.0])
     late = np.full((2, 3), np.nan)
-    _, reason = _solver(method).integrate(
+    _, failure = _solver(method).integrate(
         linear_rhs, linear_jac, Y0, 0.0, 2.0, t_out, late, time.perf_counter() - 1.0
     )
-    assert "wall-clock limit" in reason and np.isnan(late).all()
+    assert failure is not None and failure.kind == FailureKind.WALL_CLOCK
+    assert "wall-clock limit" in failure.detail and np.isnan(late).all()
 
     def blows_up(y, dydt):  # a property that leaves its table once the state passes 1.5
         dydt[:] = A @ y if y[0] < 1.5 else np.nan
@@ -70,10 +72,10 @@ def test_failures_come_back_as_reasons(method):
         return bool(np.isfinite(dydt).all())
 
     states = np.full((2, 3), np.nan)
-    _, reason = _solver(method).integrate(
+    _, failure = _solver(method).integrate(
         blows_up, linear_jac, Y0, 0.0, 2.0, t_out, states, time.perf_counter() + 10.0
     )
-    assert reason and ("failure" in reason or "non-finite" in reason)
+    assert failure is not None and failure.kind in (FailureKind.SOLVER, FailureKind.NON_FINITE)
     assert np.isnan(states[1]).all()
 
 
