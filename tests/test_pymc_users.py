@@ -1,0 +1,100 @@
+"""A PyMC user's habits: their own priors, PyMC's distance vocabulary, checks at build time."""
+
+from __future__ import annotations
+
+import numpy as np
+import pymc as pm
+import pytest
+import xarray as xr
+
+from pymc_vcc.inference.priors import GMMPrior
+from pymc_vcc.inference.pymc.model import add_simulator, gmm_prior_variable
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.testing import Flaky, GaussianLocation, LinearGaussian
+
+pytestmark = pytest.mark.usefixtures("quiet_pymc")
+
+QUIET = {"progressbar": False}
+SIM = GaussianLocation(n_time=40)
+OBSERVED = SIM({"mu": 0.3}, np.random.default_rng(4))
+
+
+def test_a_prior_declared_under_the_parameters_name_is_used():
+    with pm.Model() as model:
+        mu = pm.TruncatedNormal("mu", mu=0.0, sigma=1.0, lower=-3.0, upper=3.0)
+        node = add_simulator("y", SIM, OBSERVED, epsilon=0.5, distance=SIM.distance)
+    assert node.variables["mu"] is mu
+    assert node.prior is None
+    assert [v.name for v in model.free_RVs] == ["mu"]
+
+
+def test_pymc_variables_mixed_with_bounds():
+    sim = LinearGaussian()
+    observed = sim({"a": 0.5, "b": 1.0}, np.random.default_rng(0))
+    with pm.Model() as model:
+        a = pm.Beta("slope", alpha=2.0, beta=2.0)
+        node = add_simulator("y", sim, observed, prior={"a": a, "b": (0.0, 1.5)}, epsilon=0.5)
+    assert node.variables["a"] is a
+    assert node.prior.bounds == {"b": (0.0, 1.5)}
+    assert node.parameter_names == ("a", "b")
+    assert {v.name for v in model.free_RVs} == {"slope", "b"}
+
+
+def test_the_entries_of_a_gmm_prior_variable():
+    rng = np.random.default_rng(0)
+    samples = np.column_stack([rng.uniform(0.1, 0.9, 300), rng.uniform(0.5, 1.4, 300)])
+    gmm = GMMPrior.fit(samples, {"a": (0.0, 1.0), "b": (0.0, 1.5)}, max_components=2, seed=0)
+    sim = LinearGaussian()
+    observed = sim({"a": 0.5, "b": 1.0}, np.random.default_rng(0))
+    with pm.Model():
+        theta = gmm_prior_variable("theta", gmm)
+        node = add_simulator("y", sim, observed, prior={"a": theta[0], "b": theta[1]})
+    assert node.prior is None and node.parameter_names == ("a", "b")
+
+
+def test_a_prior_with_mass_outside_the_bounds_is_refused():
+    with pm.Model():
+        mu = pm.Normal("theta_mu", mu=2.5, sigma=1.0)
+        with pytest.raises(ValueError, match=r"prior of 'mu' puts .* outside the bounds \[-3, 3\]"):
+            add_simulator("y", SIM, OBSERVED, prior={"mu": mu})
+        vector = pm.Uniform("v", 0.0, 1.0, shape=2)
+        with pytest.raises(ValueError, match=r"must be a scalar PyMC variable.*theta\[0\]"):
+            add_simulator("y", SIM, OBSERVED, prior={"mu": vector})
+
+
+@pytest.mark.parametrize(("distance", "sum_stat"), [("gaussian", "mean"), ("laplace", "median")])
+def test_pymcs_distance_names_and_summary_statistics(distance, sum_stat):
+    with pm.Model():
+        add_simulator("y", SIM, OBSERVED, epsilon=0.2, distance=distance, sum_stat=sum_stat)
+        tree = sample_smc_abc(draws=100, executor="serial", random_seed=1, **QUIET)
+    mean = float(tree.posterior["mu"].mean())
+    assert abs(mean - float(OBSERVED.mean())) < 0.15
+
+
+def test_stock_sample_smc_with_a_pymc_distance_takes_failed_runs_as_zero_likelihood():
+    flaky = Flaky(SIM, rate=0.3, modes=("nan", "raise"))
+    with pm.Model():
+        options = {"epsilon": 0.2, "distance": "gaussian", "sum_stat": "mean"}
+        add_simulator("y", flaky, OBSERVED, prior=SIM.bounds, **options)
+        tree = pm.sample_smc(draws=100, chains=1, random_seed=2, **QUIET)
+    assert np.isfinite(tree.posterior["mu"].values).all()
+    assert abs(float(tree.posterior["mu"].mean()) - float(OBSERVED.mean())) < 0.3
+
+
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [
+        ({"distance": "kullback_leibler"}, r"'kullback_leibler' is not available \(PyMC does not"),
+        ({"distance": "euclid"}, r"distance 'euclid' is not available; use one of \['ks'"),
+        ({"sum_stat": "mode"}, r"sum_stat 'mode' is not available"),
+        ({"sum_stat": "mean"}, r"sum_stat 'mean' does not suit distance 'ks'"),
+        ({"distance": lambda sims, obs: sims.mean()}, "one finite number per simulation"),
+        ({"distance": lambda sims, obs: sims.mean(axis=2)}, "one finite number per simulation"),
+        ({"outputs": ["z"]}, r"observed output\(s\) \['z'\] are not produced by the simulator"),
+        ({"prior": {"sigma": (0.0, 1.0)}}, r"unknown parameter\(s\) \['sigma'\]"),
+    ],
+)
+def test_mistakes_are_refused_when_the_model_is_built(options, match):
+    observed = xr.Dataset({"y": ("time", OBSERVED[0]), "z": ("time", OBSERVED[0])})
+    with pm.Model(), pytest.raises(ValueError, match=match):
+        add_simulator("y", SIM, observed, **{"outputs": ["y"], **options})
