@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pymc as pm
 import pytest
@@ -98,3 +101,29 @@ def test_mistakes_are_refused_when_the_model_is_built(options, match):
     observed = xr.Dataset({"y": ("time", OBSERVED[0]), "z": ("time", OBSERVED[0])})
     with pm.Model(), pytest.raises(ValueError, match=match):
         add_simulator("y", SIM, observed, **{"outputs": ["y"], **options})
+
+
+UNGUARDED_SCRIPT = """
+import numpy as np
+import pymc as pm
+from pymc_vcc import add_simulator, sample_smc_abc
+from pymc_vcc.testing import GaussianLocation
+
+sim = GaussianLocation()
+with pm.Model():
+    add_simulator("y", sim, sim({"mu": 0.3}, np.random.default_rng(0)), epsilon=0.5)
+    sample_smc_abc(draws=8, executor="processes", n_workers=1, progressbar=False)
+"""
+
+
+@pytest.mark.slow
+def test_a_script_without_a_main_guard_is_told_what_to_do(tmp_path):
+    script = tmp_path / "calibrate.py"
+    script.write_text(UNGUARDED_SCRIPT)
+    run = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=600, cwd=tmp_path
+    )
+    assert run.returncode != 0
+    last = run.stderr.strip().splitlines()[-1]
+    assert "MainGuardError" in last and "calibrate.py has no 'if __name__ ==" in last
+    assert "worker-crash" not in run.stderr
