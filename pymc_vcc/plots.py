@@ -16,6 +16,8 @@ import xarray as xr
 from matplotlib.figure import Figure
 from scipy.stats import gaussian_kde
 
+from pymc_vcc.inference.predictive import predictive_bands
+
 _DISPLAY_UNITS = {
     "K": ("°C", lambda v: v - 273.15),
     "Pa": ("bar", lambda v: v / 1e5),
@@ -159,22 +161,18 @@ def plot_predictive(
     calibration_end: float | None = None,
     uncalibrated: xr.Dataset | None = None,
     n_columns: int = 3,
+    interval: float = 0.9,
+    reference_label: str = "observed",
 ) -> Figure:
-    """Figs. 6 and 8: posterior predictive median and central band against the ground truth.
+    """Figs. 6 and 8: posterior predictive median and central band against the reference.
 
-    Reads the ``predictive_bands`` group (and ``predictive_reference``, the truth, if present)
-    written by :func:`pymc_vcc.inference.predictive.sample_posterior_predictive`; ``uncalibrated``
-    adds
-    the outputs of an uncalibrated model (Fig. 8). The calibration window's end is dashed.
+    Draws the :func:`~pymc_vcc.inference.predictive.predictive_bands` of the tree written by
+    :func:`~pymc_vcc.inference.predictive.simulate_predictive` and its ``observed_data`` (the
+    reference, labelled ``reference_label``: e.g. "measured" or "truth"); ``uncalibrated``
+    adds the outputs of an uncalibrated model (Fig. 8). The calibration window's end is dashed.
     """
-    if "predictive_bands" not in tree.children:
-        raise ValueError("tree has no predictive_bands group; run sample_posterior_predictive")
-    bands = tree["predictive_bands"].to_dataset()
-    reference = (
-        tree["predictive_reference"].to_dataset()
-        if "predictive_reference" in tree.children
-        else None
-    )
+    bands = predictive_bands(tree, interval)
+    reference = tree["observed_data"].to_dataset() if "observed_data" in tree.children else None
     names = list(outputs) if outputs is not None else list(bands.data_vars)
     figure, axes = _grid(len(names), n_columns, (4.0, 2.5))
     time = bands["time"].values
@@ -189,7 +187,13 @@ def plot_predictive(
         ax.plot(time, median, color="tab:blue", label="predictive median")
         if reference is not None and name in reference:
             truth, _ = display(reference[name].values, units)
-            ax.plot(reference["time"].values, truth, color="black", linestyle=":", label="truth")
+            ax.plot(
+                reference["time"].values,
+                truth,
+                color="black",
+                linestyle=":",
+                label=reference_label,
+            )
         if uncalibrated is not None and name in uncalibrated:
             values, _ = display(uncalibrated[name].values, units)
             ax.plot(uncalibrated["time"].values, values, color="tab:red", label="uncalibrated")

@@ -126,8 +126,8 @@ def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys
         assert (folder / f"{stem}.png").stat().st_size > 10_000
         assert (folder / f"{stem}.svg").exists()
     predictive = xr.open_datatree(folder / "predictive_2.nc", engine="h5netcdf")
-    assert {"posterior", "posterior_predictive", "predictive_bands"} <= set(predictive.children)
-    assert float(predictive["predictive_bands"]["time"].max()) == 2120.0
+    assert {"posterior", "posterior_predictive", "observed_data"} <= set(predictive.children)
+    assert float(predictive["posterior_predictive"]["time"].max()) == 2120.0
 
 
 def test_sobol_command_writes_heatmaps(tmp_path, capsys):

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.inference.predictive import sample_posterior_predictive
+from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.physics.cycle import OUTPUT_IDS
@@ -145,7 +145,7 @@ def estimation_study(
             **settings.rejection_options(),
         )
         predictive = [
-            sample_posterior_predictive(
+            simulate_predictive(
                 tree,
                 full,
                 reference=reference,
@@ -197,6 +197,7 @@ def _write(
             tree,
             calibration_end=t_calibration,
             uncalibrated=result.uncalibrated if k == 1 else None,
+            reference_label="truth",
         )
         files += save_figure(ppd, out / f"fig{6 if k == 0 else 8}_predictive_dataset{k + 1}")
     return [str(path) for path in files]
