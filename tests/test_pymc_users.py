@@ -127,3 +127,26 @@ def test_a_script_without_a_main_guard_is_told_what_to_do(tmp_path):
     last = run.stderr.strip().splitlines()[-1]
     assert "MainGuardError" in last and "calibrate.py has no 'if __name__ ==" in last
     assert "worker-crash" not in run.stderr
+
+
+def test_one_result_layout_stages_totals_units_and_netcdf(tmp_path):
+    observed = xr.Dataset(
+        {"y": ("time", OBSERVED[0], {"units": "K", "long_name": "a temperature"})},
+        coords={"time": ("time", np.arange(40.0), {"units": "s"})},
+    )
+    with pm.Model():
+        add_simulator("node", SIM, observed, epsilon=0.3, distance=SIM.distance)
+        tree = sample_smc_abc(draws=30, chains=2, executor="serial", random_seed=3, **QUIET)
+    stats = tree["sample_stats"].to_dataset()
+    assert stats["beta"].dims == ("chain", "stage") and stats.sizes["chain"] == 2
+    assert (stats["beta"].max("stage") == 1.0).all()
+    assert stats.attrs["n_simulations"] == int(stats["simulations"].sum()) > 2 * 3 * 30
+    observed_data = tree["observed_data"].to_dataset()
+    assert list(observed_data.data_vars) == ["y"]
+    assert observed_data["y"].attrs == {"units": "K", "long_name": "a temperature"}
+    np.testing.assert_array_equal(observed_data["time"], np.arange(40.0))
+    path = tmp_path / "smc.nc"
+    tree.to_netcdf(path)
+    back = xr.open_datatree(path)
+    np.testing.assert_array_equal(back["sample_stats"]["beta"], stats["beta"])
+    np.testing.assert_array_equal(back["posterior"]["mu"], tree["posterior"]["mu"])
