@@ -11,6 +11,7 @@ import pytest
 import xarray as xr
 
 from pymc_vcc.inference.priors import GMMPrior
+from pymc_vcc.inference.pymc.layout import stage_statistics
 from pymc_vcc.inference.pymc.model import add_simulator, gmm_prior_variable
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.testing import Flaky, GaussianLocation, LinearGaussian
@@ -150,3 +151,16 @@ def test_one_result_layout_stages_totals_units_and_netcdf(tmp_path):
     back = xr.open_datatree(path)
     np.testing.assert_array_equal(back["sample_stats"]["beta"], stats["beta"])
     np.testing.assert_array_equal(back["posterior"]["mu"], tree["posterior"]["mu"])
+
+
+def test_chains_with_different_numbers_of_stages_are_padded():
+    ragged = np.empty(2, dtype=object)
+    ragged[0], ragged[1] = [120, 90, 90], [120, 90]
+    nested = np.empty((2, 1), dtype=object)
+    nested[0, 0], nested[1, 0] = [0.1, 0.4, 1], [0.2, 1]  # ints and floats mixed, as PyMC's
+    stats = stage_statistics(
+        xr.Dataset({"simulations": ("chain", ragged), "beta": (("chain", "beta_dim_0"), nested)})
+    )
+    np.testing.assert_array_equal(stats["beta"], [[0.1, 0.4, 1.0], [0.2, 1.0, np.nan]])
+    assert stats["simulations"].dims == ("chain", "stage")
+    assert stats.attrs["n_simulations"] == 510

@@ -42,16 +42,16 @@ def stage_statistics(sample_stats: xr.Dataset) -> xr.Dataset:
     """``sample_stats`` with every ragged per-stage statistic over ``(chain, stage)``."""
     per_stage = {}
     for name, variable in sample_stats.data_vars.items():
-        if variable.dtype != object or variable.ndim != 2 or variable.dims[0] != "chain":
+        if variable.dtype != object or variable.dims[:1] != ("chain",):
             continue
-        chains = [_numbers(row) for row in variable.values]
+        chains = [_numbers(np.atleast_1d(row)) for row in variable.values]
         width = max(len(stages) for stages in chains)
         table = np.full((len(chains), width), np.nan)
         for index, stages in enumerate(chains):
             table[index, : len(stages)] = stages
-        per_stage[name] = variable.dims[1], table
+        per_stage[name] = variable.dims[1:], table
     result = sample_stats.drop_vars(list(per_stage)).drop_dims(
-        [dim for dim, _ in per_stage.values()], errors="ignore"
+        [dim for dims, _ in per_stage.values() for dim in dims], errors="ignore"
     )
     for name, (_, table) in per_stage.items():
         result[name] = (("chain", "stage"), table)

@@ -252,6 +252,15 @@ def prior_variables(prior: Prior, *, joint_name: str = "theta") -> dict[str, Ten
     raise TypeError(f"prior must be a UniformPrior or a GMMPrior, got {type(prior).__name__}")
 
 
+def _known_bounds(simulator: Simulator) -> dict[str, tuple[float, float]]:
+    """Every parameter bound the simulator knows: its ``bounds`` or its unit's table (or none)."""
+    if hasattr(simulator, "bounds"):
+        return dict(simulator.bounds)
+    if hasattr(simulator, "unit"):
+        return {spec.id: (spec.low, spec.high) for spec in simulator.unit.parameters}
+    return {}
+
+
 def simulator_bounds(
     simulator: Simulator, parameters: Sequence[str] | None = None
 ) -> dict[str, tuple[float, float]]:
@@ -264,11 +273,8 @@ def simulator_bounds(
         parameters: names to keep, in this order (default: the simulator's
             ``parameter_names`` if it has them, else all).
     """
-    if hasattr(simulator, "bounds"):
-        available = dict(simulator.bounds)
-    elif hasattr(simulator, "unit"):
-        available = {spec.id: (spec.low, spec.high) for spec in simulator.unit.parameters}
-    else:
+    available = _known_bounds(simulator)
+    if not available:
         raise ValueError(
             f"{type(simulator).__name__} has neither `bounds` nor a unit description; "
             "pass prior= explicitly"
@@ -401,14 +407,6 @@ def _check_within_bounds(
         )
 
 
-def _known_bounds(simulator: Simulator) -> dict[str, tuple[float, float]]:
-    """All parameter bounds the simulator knows (empty if it has none)."""
-    try:
-        return simulator_bounds(simulator, None if hasattr(simulator, "bounds") else [])
-    except ValueError:
-        return {}
-
-
 def _prior_parts(
     prior: Prior | Mapping | None,
     simulator: Simulator,
@@ -425,13 +423,16 @@ def _prior_parts(
             f"variable, got {type(prior).__name__}"
         )
     entries = dict(prior or {})
-    if parameters is None and not entries:
-        parameters = list(simulator_bounds(simulator))
-    names = list(dict.fromkeys([*(parameters or []), *entries]))
+    offered = getattr(simulator, "parameter_names", None) or list(_known_bounds(simulator))
+    declared = [n for n in offered if n in model.named_vars and n not in entries]
+    if parameters is not None:
+        names = list(parameters)
+    elif entries:
+        names = [*entries, *declared]
+    else:
+        names = list(simulator_bounds(simulator))
     given = {n: v for n, v in entries.items() if isinstance(v, Variable)}
-    given.update(
-        {n: model[n] for n in names if n not in entries and n in model.named_vars}
-    )  # a variable the user declared under the parameter's name
+    given.update({n: model[n] for n in names if n in declared})
     rest = [n for n in names if n not in given]
     bounds = {n: entries[n] for n in rest if n in entries}
     missing = [n for n in rest if n not in bounds]
@@ -506,9 +507,10 @@ def add_simulator(
         prior: a :class:`UniformPrior`, a :class:`GMMPrior` (e.g. the fitted posterior of the
             previous dataset; its names may include noise scales ``nu_<output>``), or a mapping
             name -> (low, high) or PyMC variable already in the model (any distribution, e.g.
-            ``pm.TruncatedNormal`` or an entry of :func:`gmm_prior_variable`), mixed freely; a
-            parameter without an entry gets a uniform prior on the simulator's bounds, unless a
-            model variable already bears its name, which is then its prior. A PyMC variable
+            ``pm.TruncatedNormal`` or an entry of :func:`gmm_prior_variable`), mixed freely. A
+            model variable that bears the name of a simulator parameter is that parameter's
+            prior (and calibrates it); any other parameter without an entry gets a uniform
+            prior on the simulator's bounds. A PyMC variable
             must stay within the simulator's bounds of its parameter (checked on
             :data:`PRIOR_CHECK_DRAWS` draws).
         outputs: outputs compared (default: all outputs of ``observed``).
