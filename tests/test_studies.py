@@ -42,7 +42,8 @@ def test_leak_command_writes_table_ii_and_reloadable_trees(tmp_path, capsys):
         assert 0.9 <= row["mean_kg"] <= 2.2
     # two charges 0.8 kg apart are told apart even at the smoke budget
     assert summary["rows"][0]["mean_kg"] > summary["rows"][1]["mean_kg"]
-    folder = out / "leak"
+    folder = out
+    assert summary["files"] == sorted(str(path) for path in out.rglob("*") if path.is_file())
     for name in (
         "table_ii.csv",
         "table_ii.txt",
@@ -106,7 +107,7 @@ def test_killed_leak_run_resumes_and_completes(tmp_path):
     assert finished.returncode == 0, finished.stderr
     summary = json.loads(finished.stdout.strip().splitlines()[-1])
     assert summary["rows"][0]["reference_kg"] == 1.6
-    assert (out / "leak" / "table_ii.csv").exists()
+    assert (out / "table_ii.csv").exists()
 
 
 def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys):
@@ -115,7 +116,7 @@ def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert set(summary) >= {"truths", "posterior_means", "sd_ratio", "n_simulations"}
     assert len(summary["truths"]) == 2 and len(summary["truths"][0]) == 26
-    folder = out / "estimate"
+    folder = out
     for stem in (
         "fig4_inputs",
         "fig5_kde_dataset1",
@@ -135,7 +136,7 @@ def test_sobol_command_writes_heatmaps(tmp_path, capsys):
     main(["sobol", "--budget", "smoke", "--out", str(out), "--json"])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert summary["n_simulations"] == 2 * 28
-    indices = xr.open_dataset(out / "sobol" / "sobol_indices.nc", engine="h5netcdf")
+    indices = xr.open_dataset(out / "sobol_indices.nc", engine="h5netcdf")
     assert indices["S1"].shape == (26, 9)
     for stem in ("sobol_first_order", "sobol_total_order"):
-        assert (out / "sobol" / f"{stem}.png").exists()
+        assert (out / f"{stem}.png").exists()

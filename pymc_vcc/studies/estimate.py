@@ -179,7 +179,7 @@ def _write(
     t_calibration: float,
     settings: StudySettings,
 ) -> list[str]:
-    out = settings.out / "estimate"
+    out = settings.out
     out.mkdir(parents=True, exist_ok=True)
     files = [out / "calibration.nc", out / "summary.json"]
     result.calibration.to_netcdf(files[0])

@@ -204,7 +204,7 @@ def leak_study(
 
 
 def _write(result: LeakResult, settings: StudySettings) -> list[str]:
-    out = settings.out / "leak"
+    out = settings.out
     out.mkdir(parents=True, exist_ok=True)
     files = []
     for stage, tree in enumerate(result.trees):

@@ -78,7 +78,7 @@ def sobol_study(
         )
     result = SobolResult(indices, time.perf_counter() - started)
     if settings.out is not None:
-        out = settings.out / "sobol"
+        out = settings.out
         out.mkdir(parents=True, exist_ok=True)
         indices.to_netcdf(out / "sobol_indices.nc", engine="h5netcdf")
         write_json(out / "summary.json", result.summary())
