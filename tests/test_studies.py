@@ -1,5 +1,6 @@
 """The studies run end to end at the smoke budget, write their files, and resume after a kill."""
 
+import io
 import json
 import os
 import signal
@@ -140,3 +141,23 @@ def test_sobol_command_writes_heatmaps(tmp_path, capsys):
     assert indices["S1"].shape == (26, 9)
     for stem in ("sobol_first_order", "sobol_total_order"):
         assert (out / f"{stem}.png").exists()
+
+
+def test_the_smc_leak_study_shows_progress_on_a_terminal(monkeypatch):
+    import pymc_vcc.studies.leak as leak
+
+    class Called(Exception):
+        pass
+
+    def fake_sample_smc_abc(*args, progressbar, **kwargs):
+        raise Called(progressbar)
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(leak, "sample_smc_abc", fake_sample_smc_abc)
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    with pytest.raises(Called) as called:
+        leak_study(StudySettings(budget="smoke", executor="serial"), sampler="smc")
+    assert called.value.args == (True,)

@@ -17,6 +17,7 @@ import numpy as np
 import pymc as pm
 import xarray as xr
 
+from pymc_vcc.execution.progress import progress_enabled
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
@@ -123,7 +124,7 @@ def _calibrate(
             executor=executor,
             random_seed=int(seed.generate_state(1)[0]),
             checkpoint=settings.checkpoint(f"leak_smc_{stage}"),
-            progressbar=bool(settings.progress),
+            progressbar=progress_enabled(settings.progress),
         )
     stats = tree["sample_stats"]
     return tree, int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
