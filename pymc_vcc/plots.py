@@ -31,6 +31,41 @@ def display(values: np.ndarray, units: str) -> tuple[np.ndarray, str]:
     return convert(np.asarray(values, dtype=float)), label
 
 
+def in_display_units(
+    tree: xr.DataTree, groups: Sequence[str] = ("posterior_predictive", "observed_data")
+) -> xr.DataTree:
+    """A copy of ``tree`` whose outputs in ``groups`` are in display units (°C, bar, g/s), their
+    ``units`` attrs changed to match: for ArviZ figures such as ``az.plot_ppc_dist``."""
+    result = tree.copy()
+    for group in groups:
+        if group not in result.children:
+            continue
+        dataset = result[group].to_dataset()
+        for name, variable in dataset.data_vars.items():
+            values, units = display(variable.values, variable.attrs.get("units", ""))
+            dataset[name] = variable.copy(data=values).assign_attrs(units=units)
+        result[group] = xr.DataTree(dataset)
+    return result
+
+
+def labeller(tree: xr.DataTree, parameters: Sequence | None = None):
+    """An ArviZ labeller naming variables by long name and unit, e.g. "Compressor discharge
+    pressure (bar)": outputs from their attrs in ``tree``, parameters from ``parameters``
+    (specs with ``id``, ``name`` and ``unit``, e.g. ``unit.parameters``)."""
+    from arviz_base.labels import MapLabeller
+
+    names = {
+        spec.id: f"{spec.name} ({spec.unit})" if spec.unit not in ("", "1") else spec.name
+        for spec in parameters or ()
+    }
+    for group in tree.children.values():
+        for name, variable in group.to_dataset().data_vars.items():
+            if "long_name" in variable.attrs:
+                units = variable.attrs.get("units", "")
+                names[name] = variable.attrs["long_name"] + (f" ({units})" if units else "")
+    return MapLabeller(var_name_map=names)
+
+
 def save_figure(figure: Figure, path_stem: str | Path) -> list[Path]:
     """Write ``figure`` as ``<stem>.png`` and ``<stem>.svg``; returns the paths."""
     stem = Path(path_stem)
