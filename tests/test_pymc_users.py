@@ -53,7 +53,9 @@ def test_the_entries_of_a_gmm_prior_variable():
     with pm.Model():
         theta = gmm_prior_variable("theta", gmm)
         node = add_simulator("y", sim, observed, prior={"a": theta[0], "b": theta[1]})
+        tree = sample_smc_abc(draws=20, executor="serial", random_seed=1, **QUIET)
     assert node.prior is None and node.parameter_names == ("a", "b")
+    assert {"a", "b", "theta"} <= set(tree["posterior"].data_vars)
 
 
 def test_a_prior_with_mass_outside_the_bounds_is_refused():

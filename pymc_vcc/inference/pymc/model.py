@@ -512,7 +512,8 @@ def add_simulator(
             prior (and calibrates it); any other parameter without an entry gets a uniform
             prior on the simulator's bounds. A PyMC variable
             must stay within the simulator's bounds of its parameter (checked on
-            :data:`PRIOR_CHECK_DRAWS` draws).
+            :data:`PRIOR_CHECK_DRAWS` draws); an unnamed expression (``theta[0]``) becomes a
+            ``pm.Deterministic`` named as the parameter, so the posterior holds it by name.
         outputs: outputs compared (default: all outputs of ``observed``).
         noise: bounds of uniform priors on the noise scales ν: one pair for every output or a
             mapping output -> (low, high); None: no noise (unless ``prior`` names them).
@@ -570,6 +571,8 @@ def add_simulator(
     for parameter, variable in given.items():
         limits = (0.0, np.inf) if parameter.startswith(NOISE_PREFIX) else bounds.get(parameter)
         _check_within_bounds(parameter, variable, limits)
+        if variable.name not in model.named_vars:  # an expression such as theta[0]: name it
+            given[parameter] = pm.Deterministic(parameter, variable)
 
     variables = {
         **given,
