@@ -150,20 +150,91 @@ def plot_prior_posterior(
     return figure
 
 
+UNTRUSTED_FRACTION = 0.5
+"""A Sobol figure warns that the budget is too small when more than this fraction of its
+indices have a 95 % interval wider than the index itself."""
+
+
 def plot_sobol_heatmap(indices: xr.Dataset, order: str = "S1") -> Figure:
-    """Figs. 9 and 10: Sobol indices of ``order`` ("S1" or "ST") as parameters × outputs."""
+    """Figs. 9 and 10: Sobol indices of ``order`` ("S1" or "ST") as parameters × outputs.
+
+    Each cell shows the index and its 95 % half-width (``<order>_conf``, if present); cells
+    whose interval is wider than the index are hatched, values below 0 or above 1 (sampling
+    error) get the colour bar's end colours and their value written, never clipped silently,
+    and the figure says so when most indices cannot be trusted at this budget.
+    """
     if order not in ("S1", "ST"):
         raise ValueError(f"order must be 'S1' or 'ST', got {order!r}")
     values = indices[order].transpose("parameter", "output").values
+    conf_name = f"{order}_conf"
+    conf = (
+        indices[conf_name].transpose("parameter", "output").values
+        if conf_name in indices
+        else np.full_like(values, np.nan)
+    )
     parameters = [str(p) for p in indices["parameter"].values]
     outputs = [str(o) for o in indices["output"].values]
-    figure, ax = plt.subplots(figsize=(1.0 + 0.7 * len(outputs), 1.0 + 0.3 * len(parameters)))
-    image = ax.imshow(np.clip(values, 0.0, 1.0), cmap="viridis", vmin=0.0, vmax=1.0, aspect="auto")
+    figure, ax = plt.subplots(figsize=(1.5 + 0.8 * len(outputs), 1.6 + 0.32 * len(parameters)))
+    colours = plt.get_cmap("viridis").copy()
+    colours.set_under("tab:blue")
+    colours.set_over("tab:red")
+    image = ax.imshow(values, cmap=colours, vmin=0.0, vmax=1.0, aspect="auto")
+    uncertain = conf > np.abs(values)
+    for (row, column), value in np.ndenumerate(values):
+        text = (
+            f"{value:.2f}"
+            if np.isnan(conf[row, column])
+            else (f"{value:.2f}\n±{conf[row, column]:.2f}")
+        )
+        dark = 0.0 <= value < 0.6
+        ax.text(
+            column,
+            row,
+            text,
+            ha="center",
+            va="center",
+            fontsize=5,
+            color="white" if dark else "black",
+        )
+        if uncertain[row, column]:
+            ax.add_patch(
+                plt.Rectangle(
+                    (column - 0.5, row - 0.5),
+                    1,
+                    1,
+                    fill=False,
+                    hatch="///",
+                    edgecolor="grey",
+                    linewidth=0.0,
+                )
+            )
     ax.set_xticks(range(len(outputs)), outputs)
     ax.set_yticks(range(len(parameters)), parameters, fontsize=7)
     ax.set_title("first-order Sobol indices" if order == "S1" else "total-order Sobol indices")
-    figure.colorbar(image, ax=ax, fraction=0.05)
-    figure.tight_layout()
+    below, above = bool((values < 0).any()), bool((values > 1).any())
+    extend = {(False, False): "neither", (True, False): "min", (False, True): "max"}.get(
+        (below, above), "both"
+    )
+    figure.colorbar(image, ax=ax, fraction=0.05, extend=extend)
+    notes = [
+        f"hatched: 95 % interval wider than the index ({int(uncertain.sum())} of {values.size})"
+    ]
+    if below or above:
+        notes.append(
+            f"{int((values < 0).sum() + (values > 1).sum())} indices outside [0, 1] "
+            f"(from {np.nanmin(values):.2f} to {np.nanmax(values):.2f}): sampling error"
+        )
+    if uncertain.mean() > UNTRUSTED_FRACTION:
+        notes.append("budget too small to trust these indices: run a larger budget")
+    figure.text(
+        0.01,
+        0.005,
+        "\n".join(notes),
+        fontsize=7,
+        va="bottom",
+        color="tab:red" if uncertain.mean() > UNTRUSTED_FRACTION else "black",
+    )
+    figure.tight_layout(rect=(0.0, 0.03 * len(notes), 1.0, 1.0))
     return figure
 
 

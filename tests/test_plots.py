@@ -56,3 +56,29 @@ def test_figures_are_written(tmp_path):
 def test_unknown_parameter_is_a_clear_error():
     with pytest.raises(ValueError, match="not in the posterior"):
         plot_prior_posterior(_tree(np.random.default_rng(1)), ["nope"])
+
+
+def test_sobol_heatmap_shows_intervals_and_never_clips_silently(tmp_path):
+    rng = np.random.default_rng(2)
+    s1 = rng.uniform(0.0, 1.0, (4, 3))
+    s1[0, 0], s1[1, 2] = -2.3, 4.3  # what a smoke budget gives
+    indices = xr.Dataset(
+        {
+            "S1": (("parameter", "output"), s1),
+            "S1_conf": (("parameter", "output"), np.full((4, 3), 1.5)),
+        },
+        coords={"parameter": ["a", "b", "c", "d"], "output": ["TD", "PD", "MDOT"]},
+    )
+    figure = plot_sobol_heatmap(indices, "S1")
+    (image,) = figure.axes[0].images
+    np.testing.assert_array_equal(image.get_array(), s1)  # not clipped
+    notes = " ".join(text.get_text() for text in figure.texts)
+    assert "2 indices outside [0, 1] (from -2.30 to 4.30)" in notes
+    wide = int((np.abs(s1) < 1.5).sum())
+    assert wide > 6
+    assert f"hatched: 95 % interval wider than the index ({wide} of 12)" in notes
+    assert "budget too small to trust" in notes
+    cells = [text.get_text() for text in figure.axes[0].texts]
+    assert "-2.30\n±1.50" in cells
+    assert figure.axes[1].get_label() == "<colorbar>"
+    save_figure(figure, tmp_path / "sobol_smoke")
