@@ -125,8 +125,13 @@ def plot_prior_posterior(
     truth: Mapping[str, float] | None = None,
     long_names: Mapping[str, str] | None = None,
     n_columns: int = 4,
+    uniform: Mapping[str, tuple[float, float]] | None = None,
 ) -> Figure:
-    """Figs. 5 and 7: KDEs of prior and posterior draws per parameter, true values marked."""
+    """Figs. 5 and 7: KDEs of prior and posterior draws per parameter, true values marked.
+
+    ``uniform`` gives the bounds of parameters whose prior is uniform: their prior is drawn
+    as the flat density it is, not as a KDE of its draws (which bulges and sags at the ends).
+    """
     prior = tree["prior"].to_dataset()
     posterior = tree["posterior"].to_dataset()
     names = list(parameters) if parameters is not None else list(posterior.data_vars)
@@ -139,7 +144,16 @@ def plot_prior_posterior(
         posterior_draws = posterior[name].values.ravel()
         both = np.concatenate([prior_draws, posterior_draws])
         low, high = float(np.nanmin(both)), float(np.nanmax(both))
-        _kde_line(ax, prior_draws, low, high, color="tab:grey", label="prior")
+        if uniform is not None and name in uniform:
+            lower, upper = uniform[name]
+            ax.plot(
+                [lower, lower, upper, upper],
+                [0.0, 1.0 / (upper - lower), 1.0 / (upper - lower), 0.0],
+                color="tab:grey",
+                label="prior",
+            )
+        else:
+            _kde_line(ax, prior_draws, low, high, color="tab:grey", label="prior")
         _kde_line(ax, posterior_draws, low, high, color="tab:blue", label="posterior")
         if truth is not None and name in truth:
             ax.axvline(truth[name], color="tab:red", linestyle="--", label="true")

@@ -82,3 +82,17 @@ def test_sobol_heatmap_shows_intervals_and_never_clips_silently(tmp_path):
     assert "-2.30\n±1.50" in cells
     assert figure.axes[1].get_label() == "<colorbar>"
     save_figure(figure, tmp_path / "sobol_smoke")
+
+
+def test_a_uniform_prior_is_drawn_flat():
+    rng = np.random.default_rng(3)
+    tree = xr.DataTree.from_dict(
+        {
+            "prior": xr.Dataset({"M0": (("chain", "draw"), rng.uniform(0.9, 2.2, (1, 300)))}),
+            "posterior": xr.Dataset({"M0": (("chain", "draw"), rng.normal(1.5, 0.05, (1, 300)))}),
+        }
+    )
+    figure = plot_prior_posterior(tree, uniform={"M0": (0.9, 2.2)})
+    prior_line = next(line for line in figure.axes[0].lines if line.get_label() == "prior")
+    np.testing.assert_allclose(prior_line.get_xdata(), [0.9, 0.9, 2.2, 2.2])
+    np.testing.assert_allclose(prior_line.get_ydata()[1:3], 1.0 / 1.3)

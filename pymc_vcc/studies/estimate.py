@@ -191,7 +191,15 @@ def _write(
         write_tree(tree, path)
         files.append(path)
         ordered = [*SENSITIVE, *(name for name in truth if name not in SENSITIVE)]
-        kde = plot_prior_posterior(tree, ordered, truth=truth, long_names=long_names)
+        kde = plot_prior_posterior(
+            tree,
+            ordered,
+            truth=truth,
+            long_names=long_names,
+            uniform={spec.id: (spec.low, spec.high) for spec in unit.parameters}
+            if k == 0
+            else None,
+        )
         files += save_figure(kde, out / f"fig{5 if k == 0 else 7}_kde_dataset{k + 1}")
         ppd = plot_predictive(
             tree,
