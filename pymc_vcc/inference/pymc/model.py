@@ -299,21 +299,22 @@ PRIOR_CHECK_DRAWS = 2000
 """Prior draws of a user's PyMC variable checked against the bounds of its parameter."""
 
 
-def _pymc_kernel(kernel: Callable) -> Callable:
-    """PyMC's elementwise distance ``kernel`` with −inf (zero likelihood) for a failed run."""
-
-    def log_kernel(epsilon, observed, simulated):
-        values = kernel(epsilon, observed, simulated)
-        return pt.switch(pt.isnan(values), -np.inf, values)
-
-    log_kernel.__name__ = log_kernel.__qualname__ = f"{kernel.__name__}_or_failed"
-    return log_kernel
+def _zero_likelihood_if_failed(log_kernel):
+    """−inf (zero likelihood) where a failed run left NaN outputs, instead of NaN."""
+    return pt.switch(pt.isnan(log_kernel), -np.inf, log_kernel)
 
 
-_PYMC_KERNELS = {
-    "gaussian": _pymc_kernel(pymc_simulator.gaussian),
-    "laplace": _pymc_kernel(pymc_simulator.laplace),
-}
+def gaussian_kernel(epsilon, observed, simulated):
+    """PyMC's ``"gaussian"`` distance −½ ((obs − sim)/ε)², elementwise; −inf for a failed run."""
+    return _zero_likelihood_if_failed(pymc_simulator.gaussian(epsilon, observed, simulated))
+
+
+def laplace_kernel(epsilon, observed, simulated):
+    """PyMC's ``"laplace"`` distance −|obs − sim|/ε, elementwise; −inf for a failed run."""
+    return _zero_likelihood_if_failed(pymc_simulator.laplace(epsilon, observed, simulated))
+
+
+_PYMC_KERNELS = {"gaussian": gaussian_kernel, "laplace": laplace_kernel}
 
 
 def _distance_op(
