@@ -310,15 +310,15 @@ def _read_table(path: Path) -> tuple[_Table, str]:
         raise ValueError(f"{path}: {str(error).strip()}") from None
     except pd.errors.EmptyDataError:
         frame = pd.DataFrame()
-    frame = frame[frame.apply(lambda row: row.str.strip().ne("").any(), axis=1)]
+    frame = frame.apply(lambda column: column.fillna("").str.strip())
+    frame = frame[frame.ne("").any(axis=1)]
     if len(frame) < 3:
         raise ValueError(f"{path}: expected a header row and at least two data rows")
-    header = [cell.strip() for cell in frame.iloc[0]]
+    header = list(frame.iloc[0])
     if len(set(header)) != len(header):
         duplicates = sorted({name for name in header if header.count(name) > 1})
         raise ValueError(f"{path}: duplicate column name(s) {duplicates}")
     cells = frame.iloc[1:].reset_index(drop=True)
-    cells = cells.apply(lambda column: column.str.strip())
     return _Table(header, cells, {}, 2), delimiter
 
 
