@@ -49,20 +49,20 @@ def in_display_units(
 
 
 def labeller(tree: xr.DataTree, parameters: Sequence | None = None):
-    """An ArviZ labeller naming variables by long name and unit, e.g. "Compressor discharge
-    pressure (bar)": outputs from their attrs in ``tree``, parameters from ``parameters``
-    (specs with ``id``, ``name`` and ``unit``, e.g. ``unit.parameters``)."""
+    """An ArviZ labeller naming variables by long name and unit (on a second line), e.g.
+    "Compressor discharge pressure (bar)": outputs from their attrs in ``tree``, parameters
+    from ``parameters`` (specs with ``id``, ``name`` and ``unit``, e.g. ``unit.parameters``)."""
     from arviz_base.labels import MapLabeller
 
     names = {
-        spec.id: f"{spec.name} ({spec.unit})" if spec.unit not in ("", "1") else spec.name
+        spec.id: f"{spec.name}\n({spec.unit})" if spec.unit not in ("", "1") else spec.name
         for spec in parameters or ()
     }
     for group in tree.children.values():
         for name, variable in group.to_dataset().data_vars.items():
             if "long_name" in variable.attrs:
                 units = variable.attrs.get("units", "")
-                names[name] = variable.attrs["long_name"] + (f" ({units})" if units else "")
+                names[name] = variable.attrs["long_name"] + (f"\n({units})" if units else "")
     return MapLabeller(var_name_map=names)
 
 

@@ -96,3 +96,19 @@ def test_a_uniform_prior_is_drawn_flat():
     prior_line = next(line for line in figure.axes[0].lines if line.get_label() == "prior")
     np.testing.assert_allclose(prior_line.get_xdata(), [0.9, 0.9, 2.2, 2.2])
     np.testing.assert_allclose(prior_line.get_ydata()[1:3], 1.0 / 1.3)
+
+
+def test_arviz_labels_and_display_units():
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.plots import in_display_units, labeller
+
+    observed = xr.Dataset(
+        {"PD": ("time", [27e5, 28e5], {"units": "Pa", "long_name": "Discharge pressure"})}
+    )
+    tree = xr.DataTree.from_dict({"observed_data": observed})
+    shown = in_display_units(tree)
+    np.testing.assert_allclose(shown["observed_data"]["PD"].values, [27.0, 28.0])
+    assert shown["observed_data"]["PD"].attrs["units"] == "bar"
+    names = labeller(shown, [load_unit().parameters["M0"]])
+    assert names.var_name_to_str("PD") == "Discharge pressure\n(bar)"
+    assert names.var_name_to_str("M0") == "Total refrigerant mass\n(kg)"
