@@ -130,6 +130,7 @@ def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys
     predictive = xr.open_datatree(folder / "predictive_2.nc", engine="h5netcdf")
     assert {"posterior", "posterior_predictive", "observed_data"} <= set(predictive.children)
     assert float(predictive["posterior_predictive"]["time"].max()) == 2120.0
+    assert predictive["posterior_predictive"].attrs["noise"] == 0  # smooth bands
 
 
 def test_sobol_command_writes_heatmaps(tmp_path, capsys):
