@@ -37,7 +37,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.execution.store": ("CheckpointMismatchError",),
     "pymc_vcc.inference.pymc.model": ("add_simulator", "gmm_prior_variable"),
     "pymc_vcc.inference.pymc.smc": ("sample_smc_abc", "ParallelIMH"),
-    "pymc_vcc.inference.predictive": ("sample_posterior_predictive",),
+    "pymc_vcc.inference.predictive": ("simulate_predictive", "predictive_bands"),
     "pymc_vcc.inference.sensitivity": ("sobol_indices",),
     "pymc_vcc.studies": ("StudySettings", "leak_study", "estimation_study", "sobol_study"),
 }

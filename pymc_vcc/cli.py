@@ -10,9 +10,11 @@ import argparse
 import importlib
 import json
 import sys
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from pymc_vcc import __version__
 from pymc_vcc.execution.executors import EXECUTOR_KINDS
 from pymc_vcc.physics.solvers import METHODS
 
@@ -34,12 +36,22 @@ def _settings(args: argparse.Namespace):
     )
 
 
-def _report(args: argparse.Namespace, text: str, summary: dict, files: list[str]) -> int:
+def _written_files(folder: Path, since: float) -> list[str]:
+    """Every file under ``folder`` written at or after ``since`` (a ``time.time()``), sorted."""
+    if not folder.is_dir():
+        return []
+    return sorted(
+        str(path) for path in folder.rglob("*") if path.is_file() and path.stat().st_mtime >= since
+    )
+
+
+def _report(args: argparse.Namespace, text: str, summary: dict) -> int:
+    files = _written_files(Path(args.out), args.started)
     if not args.json:
         print(text)
         print(f"\nresults written to {args.out} ({len(files)} files)")
     else:
-        print(json.dumps(summary))
+        print(json.dumps({**summary, "out": str(args.out), "files": files}))
     return 0
 
 
@@ -56,7 +68,7 @@ def _leak(args: argparse.Namespace) -> int:
         f"{result.format_table()}\n\n{result.n_simulations} simulations, "
         f"{result.wall_seconds:.0f} s, sampler {result.sampler}"
     )
-    return _report(args, text, result.summary(), result.files)
+    return _report(args, text, result.summary())
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -92,7 +104,7 @@ def _estimate(args: argparse.Namespace) -> int:
         f"\n\n{result.n_simulations} simulations, {result.wall_seconds:.0f} s "
         "(sd ratio: posterior sd / sd of the uniform Table III prior)"
     )
-    return _report(args, text, summary, result.files)
+    return _report(args, text, summary)
 
 
 def _sobol(args: argparse.Namespace) -> int:
@@ -109,7 +121,7 @@ def _sobol(args: argparse.Namespace) -> int:
         + f"\n\n{summary['n_simulations']} simulations ({summary['n_failed']} failed, "
         f"{summary['n_dropped_base_samples']} base samples dropped), {result.wall_seconds:.0f} s"
     )
-    return _report(args, text, summary, result.files)
+    return _report(args, text, summary)
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -158,8 +170,16 @@ def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -
         default=budget,
         help="work budget: smoke (seconds), small (minutes), paper (Table I)",
     )
-    parser.add_argument("--executor", choices=list(EXECUTOR_KINDS), default="processes")
-    parser.add_argument("--scheduler", metavar="ADDRESS", help="address of a Dask scheduler")
+    parser.add_argument(
+        "--executor",
+        choices=list(EXECUTOR_KINDS),
+        default="processes",
+        help="where simulations run: this process, local worker processes or a Dask cluster "
+        "(default: processes)",
+    )
+    parser.add_argument(
+        "--scheduler", metavar="ADDRESS", help="address of a Dask scheduler (with --executor dask)"
+    )
     parser.add_argument(
         "--workers", type=_positive(int), help="worker processes (default: every core)"
     )
@@ -170,20 +190,35 @@ def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -
         help="wall-time limit of one simulation; a local worker running longer is stopped "
         "and the simulation counted as failed (time-limit)",
     )
-    parser.add_argument("--out", default=out, help=f"results folder (default {out})")
-    parser.add_argument("--resume", action="store_true", help="continue from checkpoints")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--out", default=out, help=f"folder the results are written into (default {out})"
+    )
+    parser.add_argument(
+        "--resume", action="store_true", help="continue from the checkpoints in --out"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of every random stream (default 0)"
+    )
     parser.add_argument(
         "--solver",
         choices=list(METHODS),
         help="ODE solver: radau (scipy, the reference) or cvode (SUNDIALS, faster) "
         "(default: the unit's [solver] method)",
     )
-    parser.add_argument("--json", action="store_true", help="print one JSON object last")
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object last: the summary, --out and every file written",
+    )
 
 
 def _add_leak_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--sampler", choices=["rejection", "smc"], default="rejection")
+    parser.add_argument(
+        "--sampler",
+        choices=["rejection", "smc"],
+        default="rejection",
+        help="ABC rejection (the paper's Algorithm 1) or PyMC's SMC-ABC (default: rejection)",
+    )
     parser.add_argument(
         "--references",
         type=float,
@@ -206,6 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="pymc-vcc",
         description="Bayesian calibration of dynamic vapor-compression-cycle models.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
 
     demo = commands.add_parser(
@@ -286,7 +322,9 @@ def _run(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pymc-vcc`` console script."""
-    return _run(build_parser().parse_args(argv))
+    args = build_parser().parse_args(argv)
+    args.started = time.time()
+    return _run(args)
 
 
 if __name__ == "__main__":

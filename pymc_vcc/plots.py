@@ -17,6 +17,7 @@ from matplotlib.figure import Figure
 from scipy.stats import gaussian_kde
 
 from pymc_vcc.execution.output_folder import atomic_path
+from pymc_vcc.inference.predictive import predictive_bands
 
 _DISPLAY_UNITS = {
     "K": ("°C", lambda v: v - 273.15),
@@ -29,6 +30,41 @@ def display(values: np.ndarray, units: str) -> tuple[np.ndarray, str]:
     """Values converted from SI to the units engineers read (°C, bar, g/s), and those units."""
     label, convert = _DISPLAY_UNITS.get(units, (units, lambda v: v))
     return convert(np.asarray(values, dtype=float)), label
+
+
+def in_display_units(
+    tree: xr.DataTree, groups: Sequence[str] = ("posterior_predictive", "observed_data")
+) -> xr.DataTree:
+    """A copy of ``tree`` whose outputs in ``groups`` are in display units (°C, bar, g/s), their
+    ``units`` attrs changed to match: for ArviZ figures such as ``az.plot_ppc_dist``."""
+    result = tree.copy()
+    for group in groups:
+        if group not in result.children:
+            continue
+        dataset = result[group].to_dataset()
+        for name, variable in dataset.data_vars.items():
+            values, units = display(variable.values, variable.attrs.get("units", ""))
+            dataset[name] = variable.copy(data=values).assign_attrs(units=units)
+        result[group] = xr.DataTree(dataset)
+    return result
+
+
+def labeller(tree: xr.DataTree, parameters: Sequence | None = None):
+    """An ArviZ labeller naming variables by long name and unit (on a second line), e.g.
+    "Compressor discharge pressure (bar)": outputs from their attrs in ``tree``, parameters
+    from ``parameters`` (specs with ``id``, ``name`` and ``unit``, e.g. ``unit.parameters``)."""
+    from arviz_base.labels import MapLabeller
+
+    names = {
+        spec.id: f"{spec.name}\n({spec.unit})" if spec.unit not in ("", "1") else spec.name
+        for spec in parameters or ()
+    }
+    for group in tree.children.values():
+        for name, variable in group.to_dataset().data_vars.items():
+            if "long_name" in variable.attrs:
+                units = variable.attrs.get("units", "")
+                names[name] = variable.attrs["long_name"] + (f"\n({units})" if units else "")
+    return MapLabeller(var_name_map=names)
 
 
 def save_figure(figure: Figure, path_stem: str | Path) -> list[Path]:
@@ -91,8 +127,13 @@ def plot_prior_posterior(
     truth: Mapping[str, float] | None = None,
     long_names: Mapping[str, str] | None = None,
     n_columns: int = 4,
+    uniform: Mapping[str, tuple[float, float]] | None = None,
 ) -> Figure:
-    """Figs. 5 and 7: KDEs of prior and posterior draws per parameter, true values marked."""
+    """Figs. 5 and 7: KDEs of prior and posterior draws per parameter, true values marked.
+
+    ``uniform`` gives the bounds of parameters whose prior is uniform: their prior is drawn
+    as the flat density it is, not as a KDE of its draws (which bulges and sags at the ends).
+    """
     prior = tree["prior"].to_dataset()
     posterior = tree["posterior"].to_dataset()
     names = list(parameters) if parameters is not None else list(posterior.data_vars)
@@ -105,7 +146,16 @@ def plot_prior_posterior(
         posterior_draws = posterior[name].values.ravel()
         both = np.concatenate([prior_draws, posterior_draws])
         low, high = float(np.nanmin(both)), float(np.nanmax(both))
-        _kde_line(ax, prior_draws, low, high, color="tab:grey", label="prior")
+        if uniform is not None and name in uniform:
+            lower, upper = uniform[name]
+            ax.plot(
+                [lower, lower, upper, upper],
+                [0.0, 1.0 / (upper - lower), 1.0 / (upper - lower), 0.0],
+                color="tab:grey",
+                label="prior",
+            )
+        else:
+            _kde_line(ax, prior_draws, low, high, color="tab:grey", label="prior")
         _kde_line(ax, posterior_draws, low, high, color="tab:blue", label="posterior")
         if truth is not None and name in truth:
             ax.axvline(truth[name], color="tab:red", linestyle="--", label="true")
@@ -116,20 +166,91 @@ def plot_prior_posterior(
     return figure
 
 
+UNTRUSTED_FRACTION = 0.5
+"""A Sobol figure warns that the budget is too small when more than this fraction of its
+indices have a 95 % interval wider than the index itself."""
+
+
 def plot_sobol_heatmap(indices: xr.Dataset, order: str = "S1") -> Figure:
-    """Figs. 9 and 10: Sobol indices of ``order`` ("S1" or "ST") as parameters × outputs."""
+    """Figs. 9 and 10: Sobol indices of ``order`` ("S1" or "ST") as parameters × outputs.
+
+    Each cell shows the index and its 95 % half-width (``<order>_conf``, if present); cells
+    whose interval is wider than the index are hatched, values below 0 or above 1 (sampling
+    error) get the colour bar's end colours and their value written, never clipped silently,
+    and the figure says so when most indices cannot be trusted at this budget.
+    """
     if order not in ("S1", "ST"):
         raise ValueError(f"order must be 'S1' or 'ST', got {order!r}")
     values = indices[order].transpose("parameter", "output").values
+    conf_name = f"{order}_conf"
+    conf = (
+        indices[conf_name].transpose("parameter", "output").values
+        if conf_name in indices
+        else np.full_like(values, np.nan)
+    )
     parameters = [str(p) for p in indices["parameter"].values]
     outputs = [str(o) for o in indices["output"].values]
-    figure, ax = plt.subplots(figsize=(1.0 + 0.7 * len(outputs), 1.0 + 0.3 * len(parameters)))
-    image = ax.imshow(np.clip(values, 0.0, 1.0), cmap="viridis", vmin=0.0, vmax=1.0, aspect="auto")
+    figure, ax = plt.subplots(figsize=(1.5 + 0.8 * len(outputs), 1.6 + 0.32 * len(parameters)))
+    colours = plt.get_cmap("viridis").copy()
+    colours.set_under("tab:blue")
+    colours.set_over("tab:red")
+    image = ax.imshow(values, cmap=colours, vmin=0.0, vmax=1.0, aspect="auto")
+    uncertain = conf > np.abs(values)
+    for (row, column), value in np.ndenumerate(values):
+        text = (
+            f"{value:.2f}"
+            if np.isnan(conf[row, column])
+            else (f"{value:.2f}\n±{conf[row, column]:.2f}")
+        )
+        dark = 0.0 <= value < 0.6
+        ax.text(
+            column,
+            row,
+            text,
+            ha="center",
+            va="center",
+            fontsize=5,
+            color="white" if dark else "black",
+        )
+        if uncertain[row, column]:
+            ax.add_patch(
+                plt.Rectangle(
+                    (column - 0.5, row - 0.5),
+                    1,
+                    1,
+                    fill=False,
+                    hatch="///",
+                    edgecolor="grey",
+                    linewidth=0.0,
+                )
+            )
     ax.set_xticks(range(len(outputs)), outputs)
     ax.set_yticks(range(len(parameters)), parameters, fontsize=7)
     ax.set_title("first-order Sobol indices" if order == "S1" else "total-order Sobol indices")
-    figure.colorbar(image, ax=ax, fraction=0.05)
-    figure.tight_layout()
+    below, above = bool((values < 0).any()), bool((values > 1).any())
+    extend = {(False, False): "neither", (True, False): "min", (False, True): "max"}.get(
+        (below, above), "both"
+    )
+    figure.colorbar(image, ax=ax, fraction=0.05, extend=extend)
+    notes = [
+        f"hatched: 95 % interval wider than the index ({int(uncertain.sum())} of {values.size})"
+    ]
+    if below or above:
+        notes.append(
+            f"{int((values < 0).sum() + (values > 1).sum())} indices outside [0, 1] "
+            f"(from {np.nanmin(values):.2f} to {np.nanmax(values):.2f}): sampling error"
+        )
+    if uncertain.mean() > UNTRUSTED_FRACTION:
+        notes.append("budget too small to trust these indices: run a larger budget")
+    figure.text(
+        0.01,
+        0.005,
+        "\n".join(notes),
+        fontsize=7,
+        va="bottom",
+        color="tab:red" if uncertain.mean() > UNTRUSTED_FRACTION else "black",
+    )
+    figure.tight_layout(rect=(0.0, 0.03 * len(notes), 1.0, 1.0))
     return figure
 
 
@@ -162,22 +283,18 @@ def plot_predictive(
     calibration_end: float | None = None,
     uncalibrated: xr.Dataset | None = None,
     n_columns: int = 3,
+    interval: float = 0.9,
+    reference_label: str = "observed",
 ) -> Figure:
-    """Figs. 6 and 8: posterior predictive median and central band against the ground truth.
+    """Figs. 6 and 8: posterior predictive median and central band against the reference.
 
-    Reads the ``predictive_bands`` group (and ``predictive_reference``, the truth, if present)
-    written by :func:`pymc_vcc.inference.predictive.sample_posterior_predictive`; ``uncalibrated``
-    adds
-    the outputs of an uncalibrated model (Fig. 8). The calibration window's end is dashed.
+    Draws the :func:`~pymc_vcc.inference.predictive.predictive_bands` of the tree written by
+    :func:`~pymc_vcc.inference.predictive.simulate_predictive` and its ``observed_data`` (the
+    reference, labelled ``reference_label``: e.g. "measured" or "truth"); ``uncalibrated``
+    adds the outputs of an uncalibrated model (Fig. 8). The calibration window's end is dashed.
     """
-    if "predictive_bands" not in tree.children:
-        raise ValueError("tree has no predictive_bands group; run sample_posterior_predictive")
-    bands = tree["predictive_bands"].to_dataset()
-    reference = (
-        tree["predictive_reference"].to_dataset()
-        if "predictive_reference" in tree.children
-        else None
-    )
+    bands = predictive_bands(tree, interval)
+    reference = tree["observed_data"].to_dataset() if "observed_data" in tree.children else None
     names = list(outputs) if outputs is not None else list(bands.data_vars)
     figure, axes = _grid(len(names), n_columns, (4.0, 2.5))
     time = bands["time"].values
@@ -192,7 +309,13 @@ def plot_predictive(
         ax.plot(time, median, color="tab:blue", label="predictive median")
         if reference is not None and name in reference:
             truth, _ = display(reference[name].values, units)
-            ax.plot(reference["time"].values, truth, color="black", linestyle=":", label="truth")
+            ax.plot(
+                reference["time"].values,
+                truth,
+                color="black",
+                linestyle=":",
+                label=reference_label,
+            )
         if uncalibrated is not None and name in uncalibrated:
             values, _ = display(uncalibrated[name].values, units)
             ax.plot(uncalibrated["time"].values, values, color="tab:red", label="uncalibrated")

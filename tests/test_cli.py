@@ -68,3 +68,20 @@ def test_benchmark_table_puts_solvers_side_by_side():
     assert header.split() == ["radau", "cvode"]
     assert median_row.split() == ["sim_seconds_median", "0.2", "0.05"]
     assert "2437" in table
+
+
+def test_version(capsys):
+    from pymc_vcc import __version__
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--version"])
+    assert exit_info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"pymc-vcc {__version__}"
+
+
+def test_every_option_has_a_help_text():
+    parser = build_parser()
+    commands = next(a for a in parser._actions if a.dest == "command").choices
+    for name, command in commands.items():
+        for action in command._actions:
+            assert action.help, (name, action.option_strings)

@@ -9,7 +9,7 @@ import pymc as pm
 import pytest
 import xarray as xr
 
-from pymc_vcc.inference.predictive import sample_posterior_predictive
+from pymc_vcc.inference.predictive import predictive_bands, simulate_predictive
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.testing import AsDataset, Flaky, GaussianLocation, LinearGaussian
@@ -36,13 +36,13 @@ def line_posterior() -> xr.DataTree:
 def test_predictive_groups_and_bands(line_posterior):
     sim = AsDataset(LinearGaussian(n_time=40, sigma=0.01))
     truth = sim({"a": 2.0, "b": -0.5}, np.random.default_rng(1))
-    tree = sample_posterior_predictive(
+    tree = simulate_predictive(
         line_posterior, sim, reference=truth, noise=False, executor="serial", seed=3
     )
     predictive = tree["posterior_predictive"].to_dataset()
     assert predictive["y"].dims == ("chain", "draw", "time")
     assert predictive["y"].shape == (2, 60, 40)
-    bands = tree["predictive_bands"].to_dataset()
+    bands = predictive_bands(tree)
     assert list(bands["band"].values) == ["lower", "median", "upper"]
     np.testing.assert_allclose(bands["probability"].values, [0.05, 0.5, 0.95])
     lower, median, upper = bands["y"].values
@@ -52,44 +52,45 @@ def test_predictive_groups_and_bands(line_posterior):
     sd = np.sqrt(0.05**2 + (0.1 * t) ** 2 + 0.01**2)  # spread of a + b·t + σe over draws
     np.testing.assert_allclose(upper - lower, 2 * 1.645 * sd, rtol=0.35)
     assert bands.attrs["n_draws"] == 120 and bands.attrs["n_failed"] == 0
-    xr.testing.assert_equal(tree["predictive_reference"].to_dataset(), truth[["y"]])
-    assert set(tree.children) >= {"posterior", "posterior_predictive", "predictive_bands"}
+    xr.testing.assert_equal(tree["observed_data"].to_dataset(), truth[["y"]])
+    assert set(tree.children) == {"posterior", "posterior_predictive", "observed_data"}
 
 
 def test_noise_scales_widen_the_bands(line_posterior):
     sim = AsDataset(LinearGaussian(n_time=40, sigma=0.01))
     settings = {"executor": "serial", "seed": 4, "outputs": ["y"]}
-    clean = sample_posterior_predictive(line_posterior, sim, noise=False, **settings)
-    noisy = sample_posterior_predictive(line_posterior, sim, noise=True, **settings)
-    width_clean = np.diff(clean["predictive_bands"]["y"].values[[0, 2]], axis=0)
-    width_noisy = np.diff(noisy["predictive_bands"]["y"].values[[0, 2]], axis=0)
+    clean = simulate_predictive(line_posterior, sim, noise=False, **settings)
+    noisy = simulate_predictive(line_posterior, sim, noise=True, **settings)
+    width_clean = np.diff(predictive_bands(clean)["y"].values[[0, 2]], axis=0)
+    width_noisy = np.diff(predictive_bands(noisy)["y"].values[[0, 2]], axis=0)
     assert width_noisy.mean() > 1.5 * width_clean.mean()
 
 
 def test_failed_draws_are_nan_counted_and_left_out_of_the_bands(line_posterior):
     sim = Flaky(AsDataset(LinearGaussian(n_time=20)), rate=0.3)
-    tree = sample_posterior_predictive(
+    tree = simulate_predictive(
         line_posterior, sim, parameters=["a", "b"], executor="serial", seed=5
     )
     values = tree["posterior_predictive"]["y"].values
     failed = np.isnan(values).all(axis=2)
-    assert failed.sum() == tree["predictive_bands"].attrs["n_failed"]
+    bands = predictive_bands(tree)
+    assert failed.sum() == bands.attrs["n_failed"] == tree["posterior_predictive"].attrs["n_failed"]
     assert 0.15 < failed.mean() < 0.45
     assert not np.isnan(values[~failed]).any()
-    assert np.isfinite(tree["predictive_bands"]["y"].values).all()
-    assert "exception" in tree["predictive_bands"].attrs["failure_kinds"]
+    assert np.isfinite(bands["y"].values).all()
+    assert "exception" in tree["posterior_predictive"].attrs["failure_kinds"]
 
 
 def test_results_do_not_depend_on_the_executor_and_draws_can_be_thinned(line_posterior):
     sim = AsDataset(LinearGaussian(n_time=20))
     settings = {"seed": 6, "max_draws": 30}
-    serial = sample_posterior_predictive(line_posterior, sim, executor="serial", **settings)
-    parallel = sample_posterior_predictive(line_posterior, sim, executor="processes", **settings)
+    serial = simulate_predictive(line_posterior, sim, executor="serial", **settings)
+    parallel = simulate_predictive(line_posterior, sim, executor="processes", **settings)
     xr.testing.assert_equal(
         serial["posterior_predictive"].to_dataset(), parallel["posterior_predictive"].to_dataset()
     )
     assert serial["posterior_predictive"]["y"].shape == (2, 15, 20)
-    from_sequence = sample_posterior_predictive(
+    from_sequence = simulate_predictive(
         line_posterior, sim, executor="serial", seed=np.random.SeedSequence(6), max_draws=30
     )
     xr.testing.assert_equal(
@@ -101,13 +102,15 @@ def test_results_do_not_depend_on_the_executor_and_draws_can_be_thinned(line_pos
 def test_bad_arguments_are_named(line_posterior):
     sim = AsDataset(LinearGaussian(n_time=20))
     with pytest.raises(ValueError, match="interval must lie in"):
-        sample_posterior_predictive(line_posterior, sim, interval=1.0, executor="serial")
+        predictive_bands(simulate_predictive(line_posterior, sim, executor="serial"), 1.0)
+    with pytest.raises(ValueError, match="no posterior_predictive group; run simulate_predictive"):
+        predictive_bands(line_posterior)
     with pytest.raises(ValueError, match=r"posterior lacks parameter\(s\) \['c'\]"):
-        sample_posterior_predictive(line_posterior, sim, parameters=["c"], executor="serial")
+        simulate_predictive(line_posterior, sim, parameters=["c"], executor="serial")
     with pytest.raises(ValueError, match="unknown outputs"):
-        sample_posterior_predictive(line_posterior, sim, outputs=["TD"], executor="serial")
+        simulate_predictive(line_posterior, sim, outputs=["TD"], executor="serial")
     with pytest.raises(ValueError, match="max_draws must be"):
-        sample_posterior_predictive(line_posterior, sim, max_draws=0, executor="serial")
+        simulate_predictive(line_posterior, sim, max_draws=0, executor="serial")
 
 
 def test_smc_posterior_predicts_a_longer_profile():
@@ -117,9 +120,9 @@ def test_smc_posterior_predicts_a_longer_profile():
         warnings.filterwarnings("ignore", message="Numba will use object mode")
         add_simulator("y", short, observed, noise=(0.0, 0.05), epsilon=0.5, distance=short.distance)
         idata = sample_smc_abc(draws=100, executor="serial", random_seed=8, progressbar=False)
-    tree = sample_posterior_predictive(idata, long, executor="serial", seed=9)
+    tree = simulate_predictive(idata, long, executor="serial", seed=9)
     assert tree["posterior_predictive"]["y"].shape == (1, 100, 200)
-    median = tree["predictive_bands"]["y"].sel(band="median").values
+    median = predictive_bands(tree)["y"].sel(band="median").values
     assert abs(median.mean() - idata.posterior["mu"].mean().item()) < 0.05
 
 
@@ -129,7 +132,7 @@ def test_vcc_predictive_keeps_time_and_units_of_the_simulator():
     sim = VCCSimulator(t_window=(20.0, 300.0), outputs=["PD", "TS", "MDOT"])
     truth = sim({"M0": 1.5})
     rng = np.random.default_rng(0)
-    tree = sample_posterior_predictive(
+    tree = simulate_predictive(
         posterior_tree({"M0": rng.normal(1.5, 0.02, (1, 6))}),
         sim,
         reference=truth,
@@ -141,5 +144,6 @@ def test_vcc_predictive_keeps_time_and_units_of_the_simulator():
     np.testing.assert_array_equal(predictive["time"].values, truth["time"].values)
     for name in ("PD", "TS", "MDOT"):
         assert predictive[name].attrs["units"] == truth[name].attrs["units"]
-    median = tree["predictive_bands"]["PD"].sel(band="median").values
+        assert predictive[name].attrs["long_name"] == truth[name].attrs["long_name"]
+    median = predictive_bands(tree)["PD"].sel(band="median").values
     np.testing.assert_allclose(median, truth["PD"].values, rtol=0.02)

@@ -1,5 +1,6 @@
 """The studies run end to end at the smoke budget, write their files, and resume after a kill."""
 
+import io
 import json
 import os
 import signal
@@ -42,7 +43,8 @@ def test_leak_command_writes_table_ii_and_reloadable_trees(tmp_path, capsys):
         assert 0.9 <= row["mean_kg"] <= 2.2
     # two charges 0.8 kg apart are told apart even at the smoke budget
     assert summary["rows"][0]["mean_kg"] > summary["rows"][1]["mean_kg"]
-    folder = out / "leak"
+    folder = out
+    assert summary["files"] == sorted(str(path) for path in out.rglob("*") if path.is_file())
     for name in (
         "table_ii.csv",
         "table_ii.txt",
@@ -106,7 +108,7 @@ def test_killed_leak_run_resumes_and_completes(tmp_path):
     assert finished.returncode == 0, finished.stderr
     summary = json.loads(finished.stdout.strip().splitlines()[-1])
     assert summary["rows"][0]["reference_kg"] == 1.6
-    assert (out / "leak" / "table_ii.csv").exists()
+    assert (out / "table_ii.csv").exists()
 
 
 def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys):
@@ -115,7 +117,7 @@ def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert set(summary) >= {"truths", "posterior_means", "sd_ratio", "n_simulations"}
     assert len(summary["truths"]) == 2 and len(summary["truths"][0]) == 26
-    folder = out / "estimate"
+    folder = out
     for stem in (
         "fig4_inputs",
         "fig5_kde_dataset1",
@@ -126,8 +128,9 @@ def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys
         assert (folder / f"{stem}.png").stat().st_size > 10_000
         assert (folder / f"{stem}.svg").exists()
     predictive = xr.open_datatree(folder / "predictive_2.nc", engine="h5netcdf")
-    assert {"posterior", "posterior_predictive", "predictive_bands"} <= set(predictive.children)
-    assert float(predictive["predictive_bands"]["time"].max()) == 2120.0
+    assert {"posterior", "posterior_predictive", "observed_data"} <= set(predictive.children)
+    assert float(predictive["posterior_predictive"]["time"].max()) == 2120.0
+    assert predictive["posterior_predictive"].attrs["noise"] == 0  # smooth bands
 
 
 def test_estimate_with_smc_and_cvode(tmp_path, capsys):
@@ -150,7 +153,27 @@ def test_sobol_command_writes_heatmaps(tmp_path, capsys):
     main(["sobol", "--budget", "smoke", "--out", str(out), "--json"])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert summary["n_simulations"] == 2 * 28
-    indices = xr.open_dataset(out / "sobol" / "sobol_indices.nc", engine="h5netcdf")
+    indices = xr.open_dataset(out / "sobol_indices.nc", engine="h5netcdf")
     assert indices["S1"].shape == (26, 9)
     for stem in ("sobol_first_order", "sobol_total_order"):
-        assert (out / "sobol" / f"{stem}.png").exists()
+        assert (out / f"{stem}.png").exists()
+
+
+def test_the_smc_leak_study_shows_progress_on_a_terminal(monkeypatch):
+    import pymc_vcc.studies.leak as leak
+
+    class Called(Exception):
+        pass
+
+    def fake_sample_smc_abc(*args, progressbar, **kwargs):
+        raise Called(progressbar)
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(leak, "sample_smc_abc", fake_sample_smc_abc)
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    with pytest.raises(Called) as called:
+        leak_study(StudySettings(budget="smoke", executor="serial"), sampler="smc")
+    assert called.value.args == (True,)

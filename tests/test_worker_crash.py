@@ -20,7 +20,7 @@ import xarray as xr
 
 from pymc_vcc.execution.executors import WorkerCrash, make_executor
 from pymc_vcc.execution.outcomes import FAILURE_KINDS, WORKER_CRASH
-from pymc_vcc.inference.predictive import sample_posterior_predictive
+from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
@@ -234,10 +234,10 @@ def test_predictive_and_sensitivity_count_crashed_runs(pool):
     mu = np.linspace(-1.0, 1.0, 40).reshape(2, 20)
     mu[0, 3], mu[1, 7], mu[1, 8] = 2.04, -2.42, -2.42
     posterior = xr.DataTree.from_dict({"posterior": xr.Dataset({"mu": (("chain", "draw"), mu)})})
-    tree = sample_posterior_predictive(posterior, CRASHING, executor=pool, seed=1)
-    bands = tree["predictive_bands"]
-    assert bands.attrs["n_failed"] == 3
-    assert bands.attrs["failure_kinds"] == "worker-crash: 3"
+    tree = simulate_predictive(posterior, CRASHING, executor=pool, seed=1)
+    predictive = tree["posterior_predictive"]
+    assert predictive.attrs["n_failed"] == 3
+    assert predictive.attrs["failure_kinds"] == "worker-crash: 3"
     failed = np.isnan(tree["posterior_predictive"]["y"]).all("time")
     np.testing.assert_array_equal(failed, CRASHING.doomed(mu))
 

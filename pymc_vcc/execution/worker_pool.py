@@ -8,12 +8,18 @@ worker is terminated (whatever it is doing, compiled code included) and replaced
 chunk fails with a crash of kind ``"time-limit"``. A chunk's clock starts when its worker has
 loaded the function (so unpickling and compiling it never count). :func:`run_chunk` is what
 every backend's workers run (Dask's too).
+
+A worker started with ``forkserver`` imports the main module; a script that samples at its top
+level, without an ``if __name__ == "__main__":`` guard, thus starts its sampling again in every
+worker, which dies at once. The first such death raises :class:`MainGuardError`, saying so.
 """
 
 from __future__ import annotations
 
+import ast
 import math
 import signal
+import sys
 import time
 import traceback
 from collections import deque
@@ -27,6 +33,7 @@ from multiprocessing.connection import Connection
 from multiprocessing.context import BaseContext
 from multiprocessing.process import BaseProcess
 from multiprocessing.reduction import ForkingPickler
+from pathlib import Path
 from typing import Any
 
 import cloudpickle
@@ -64,6 +71,38 @@ class WorkerDiedError(Exception):
     def __init__(self, crash: WorkerCrash) -> None:
         super().__init__(crash.reason)
         self.crash = crash
+
+
+class MainGuardError(RuntimeError):
+    """Worker processes die starting up because the main script has no main guard."""
+
+
+def unguarded_main_script() -> str | None:
+    """The path of the running script if it lacks an ``if __name__ == "__main__":`` guard."""
+    path = getattr(sys.modules.get("__main__"), "__file__", None)
+    try:
+        tree = ast.parse(Path(path).read_text(encoding="utf-8")) if path else None
+    except (OSError, SyntaxError, ValueError):
+        return None
+    if tree is None:
+        return None
+    for node in tree.body:
+        if isinstance(node, ast.If):
+            test = ast.unparse(node.test)
+            if "__name__" in test and "__main__" in test:
+                return None
+    return str(path)
+
+
+def _check_main_guard(exit_code: int | None) -> None:
+    """Raise :class:`MainGuardError` if a worker exited with 1 under an unguarded script."""
+    script = unguarded_main_script() if exit_code == 1 else None
+    if script is not None:
+        raise MainGuardError(
+            f"worker processes die starting up because {script} has no "
+            "'if __name__ == \"__main__\":' guard (each worker imports the script and runs it "
+            "again): put the code that samples under that guard, or use executor='serial'"
+        )
 
 
 class _RemoteTraceback(Exception):
@@ -231,6 +270,7 @@ class WorkerPool:
             worker.process.join()
         reason = _death_reason(worker.process.exitcode)
         worker.connection.close()
+        _check_main_guard(worker.process.exitcode)
         jobs = worker.jobs
         new = self._start_worker()
         worker.process, worker.connection, worker.jobs = new.process, new.connection, deque()

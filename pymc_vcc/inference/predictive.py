@@ -2,17 +2,20 @@
 
 The paper's Figs. 6 and 8 show, for each output, the median and an interval of the outputs
 simulated with posterior draws over the whole 2120 s profile, of which only the first 1060 s
-were used for calibration. :func:`sample_posterior_predictive` runs those simulations in
-parallel (one random stream per draw from ``SeedSequence.spawn``, so the result does not depend
-on the executor) and returns the posterior's DataTree with three more groups:
+were used for calibration. :func:`simulate_predictive` runs those simulations in parallel
+(one random stream per draw from ``SeedSequence.spawn``, so the result does not depend on the
+executor) and returns the posterior's DataTree with ArviZ's standard groups:
 
 ``posterior_predictive``
-    one variable per output over (chain, draw, time), SI units; failed runs are NaN.
-``predictive_bands``
-    per output, the median and the central interval over draws, dims (band, time) with
-    band = lower, median, upper (failed runs left out).
-``predictive_reference``
-    the reference outputs on the same profile (e.g. the ground truth), when given.
+    one variable per output over (chain, draw, time), SI units and long names in its attrs;
+    failed runs are NaN (counted in the group's attrs).
+``observed_data``
+    the reference outputs on the same profile (measured data, or the ground truth), when given;
+    ArviZ pairs them with ``posterior_predictive`` by name (``az.plot_ppc_dist``).
+
+(Not named ``sample_posterior_predictive``: PyMC's function of that name takes a model and
+draws from its own ``pm.Simulator`` node.) :func:`predictive_bands` derives the median and
+central interval of each output over the draws, for figures such as the paper's.
 """
 
 from __future__ import annotations
@@ -33,13 +36,17 @@ from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulat
 BANDS = ("lower", "median", "upper")
 
 
+_DESCRIBING_ATTRS = ("units", "long_name")
+
+
 @dataclass
 class _TimeAndUnits:
-    """A simulator wrapper that remembers the time grid and units of the Dataset it returns."""
+    """A simulator wrapper that remembers the time grid, units and long names of the Dataset
+    it returns."""
 
     simulator: Simulator
     time: np.ndarray | None = None
-    units: dict[str, str] | None = None
+    units: dict[str, dict[str, str]] | None = None
 
     def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> OutputData:
         result = self.simulator(theta, rng)
@@ -47,9 +54,8 @@ class _TimeAndUnits:
             if "time" in result.coords:
                 self.time = np.asarray(result["time"].values)
             self.units = {
-                str(name): str(var.attrs["units"])
+                str(name): {k: str(var.attrs[k]) for k in _DESCRIBING_ATTRS if k in var.attrs}
                 for name, var in result.data_vars.items()
-                if "units" in var.attrs
             }
         return result
 
@@ -59,7 +65,8 @@ class PredictiveRun:
     """Worker side: one posterior draw simulated, with its output noise.
 
     Called with ``(theta, noise_scales, seed)``; returns ``(values | None, status, reason,
-    time | None, units | None)`` with values (n_outputs, n_time) in ``layout.names`` order.
+    time | None, attrs | None)`` with values (n_outputs, n_time) in ``layout.names`` order and
+    attrs output -> its ``units`` and ``long_name``.
     """
 
     simulator: Simulator
@@ -109,7 +116,7 @@ def _selected_draws(posterior: xr.Dataset, max_draws: int | None) -> xr.Dataset:
     return posterior.isel(draw=keep)
 
 
-def sample_posterior_predictive(
+def simulate_predictive(
     idata: xr.DataTree,
     simulator: Simulator,
     *,
@@ -117,14 +124,13 @@ def sample_posterior_predictive(
     outputs: Sequence[str] | None = None,
     reference: OutputData | None = None,
     noise: bool = True,
-    interval: float = 0.9,
     max_draws: int | None = None,
     executor: Executor | ExecutorKind = "processes",
     n_workers: int | None = None,
     seed: int | np.random.SeedSequence | None = None,
     time_limit_s: float | None = None,
 ) -> xr.DataTree:
-    """Simulate posterior draws with ``simulator`` and add the predictive groups to ``idata``.
+    """Simulate posterior draws with ``simulator``: ``idata`` with ``posterior_predictive``.
 
     Args:
         idata: a result with a ``posterior`` group holding one (chain, draw) variable per
@@ -135,10 +141,10 @@ def sample_posterior_predictive(
         parameters: posterior variables passed to the simulator (default: those it names in
             ``parameter_names``); parameters left out keep the simulator's nominal values.
         outputs: outputs to predict (default: every output of the simulator or reference).
-        reference: outputs observed (or true) on the same profile, stored for comparison.
+        reference: outputs observed (or true) on the same profile, stored as ``observed_data``
+            (in place of the calibration data) for comparison.
         noise: add the output noise Y + ν·|Y|·Z for outputs whose ``nu_<output>`` is in the
             posterior (the predictive of data); False: predict the noise-free outputs.
-        interval: probability mass of the central band, in (0, 1) (e.g. 0.9 → 5 %–95 %).
         max_draws: simulate at most this many posterior draws, evenly thinned (default: all).
         executor: an executor, or a kind (``"serial"``, ``"processes"``, ``"dask"``).
         n_workers: workers of an executor made here.
@@ -146,14 +152,12 @@ def sample_posterior_predictive(
         time_limit_s: wall-time limit of one simulation, s; longer runs count as failed.
 
     Returns:
-        A copy of ``idata`` with groups ``posterior_predictive``, ``predictive_bands`` and (if
-        ``reference`` is given) ``predictive_reference``; ``predictive_bands`` attrs give
-        the draws simulated, failed and the failure kinds.
+        A copy of ``idata`` with group ``posterior_predictive`` (its attrs give the draws
+        simulated, failed and the failure kinds) and, if ``reference`` is given,
+        ``observed_data`` holding it.
     """
     if "posterior" not in idata.children:
         raise ValueError("idata has no posterior group")
-    if not 0.0 < interval < 1.0:
-        raise ValueError(f"interval must lie in (0, 1), got {interval}")
     posterior = _selected_draws(idata["posterior"].to_dataset(), max_draws)
     info = check_simulator(simulator)
     if parameters is None:
@@ -213,42 +217,68 @@ def sample_posterior_predictive(
     coords = {"chain": posterior["chain"].values, "draw": posterior["draw"].values, "time": time}
     predictive = xr.Dataset(
         {
-            name: (("chain", "draw", "time"), stacked[:, :, j], _attrs(units, name))
+            name: (("chain", "draw", "time"), stacked[:, :, j], units.get(name, {}))
             for j, name in enumerate(layout.names)
         },
         coords=coords,
     )
     predictive["time"].attrs["units"] = "s"
-
-    probabilities = [(1 - interval) / 2, 0.5, (1 + interval) / 2]
-    flat = stacked.reshape(n_chains * n_draws, len(layout.names), n_time)
-    ok = ~np.isnan(flat).any(axis=(1, 2))
-    quantiles = np.quantile(flat[ok], probabilities, axis=0)  # (band, output, time)
     failures = Counter(r[1] for r in results if r[0] is None)
-    bands = xr.Dataset(
+    predictive.attrs.update(
         {
-            name: (("band", "time"), quantiles[:, j], _attrs(units, name))
-            for j, name in enumerate(layout.names)
-        },
-        coords={"band": list(BANDS), "time": time, "probability": ("band", probabilities)},
-        attrs={
-            "interval": float(interval),
-            "n_draws": int(flat.shape[0]),
-            "n_failed": int((~ok).sum()),
+            "n_draws": int(n_chains * n_draws),
+            "n_failed": int(sum(failures.values())),
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(failures.items())),
             "noise": int(bool(noise)),
-        },
+        }
     )
     tree = idata.copy()
     tree["posterior_predictive"] = xr.DataTree(predictive)
-    tree["predictive_bands"] = xr.DataTree(bands)
     if reference is not None:
-        tree["predictive_reference"] = xr.DataTree(layout.dataset)
+        observed = layout.dataset.copy()
+        for name in observed.data_vars:
+            observed[name].attrs = {**units.get(name, {}), **observed[name].attrs}
+        tree["observed_data"] = xr.DataTree(observed)
     return tree
 
 
-def _attrs(units: Mapping[str, str], name: str) -> dict[str, str]:
-    return {"units": units[name]} if name in units else {}
+def predictive_bands(tree: xr.DataTree, interval: float = 0.9) -> xr.Dataset:
+    """Median and central interval of every output of ``tree``'s ``posterior_predictive``.
+
+    Args:
+        tree: a result with a ``posterior_predictive`` group of (chain, draw, time) outputs.
+        interval: probability mass of the central band, in (0, 1) (e.g. 0.9 → 5 %–95 %).
+
+    Returns:
+        One variable per output over (band, time), band = lower, median, upper, with the
+        output's attrs; draws with any NaN (failed runs) are left out and counted in the attrs
+        (``n_draws``, ``n_failed``, ``interval``).
+    """
+    if "posterior_predictive" not in tree.children:
+        raise ValueError("tree has no posterior_predictive group; run simulate_predictive")
+    if not 0.0 < interval < 1.0:
+        raise ValueError(f"interval must lie in (0, 1), got {interval}")
+    predictive = tree["posterior_predictive"].to_dataset()
+    names = list(predictive.data_vars)
+    stacked = np.stack([predictive[name].values for name in names], axis=2)
+    flat = stacked.reshape(-1, *stacked.shape[2:])  # (draws, output, time)
+    ok = ~np.isnan(flat).any(axis=(1, 2))
+    if not ok.any():
+        raise ValueError("every posterior predictive draw failed; no band can be drawn")
+    probabilities = [(1 - interval) / 2, 0.5, (1 + interval) / 2]
+    quantiles = np.quantile(flat[ok], probabilities, axis=0)  # (band, output, time)
+    return xr.Dataset(
+        {
+            name: (("band", "time"), quantiles[:, j], predictive[name].attrs)
+            for j, name in enumerate(names)
+        },
+        coords={
+            "band": list(BANDS),
+            "time": predictive["time"],
+            "probability": ("band", probabilities),
+        },
+        attrs={"interval": float(interval), "n_draws": int(ok.size), "n_failed": int((~ok).sum())},
+    )
 
 
-__all__ = ["BANDS", "PredictiveRun", "sample_posterior_predictive"]
+__all__ = ["BANDS", "PredictiveRun", "predictive_bands", "simulate_predictive"]

@@ -1,22 +1,31 @@
 """Measured data: CSV logs of a real unit as simulator inputs and observed outputs (SI).
 
-A log holds a time column (seconds or ISO-8601 datetimes), the four inputs and some or all of the
-nine outputs, in engineering units, sampled irregularly, with gaps. :func:`load_measurements`
-maps file columns to ids, converts to SI (K, Pa absolute, kg/s, valve fraction, speed in Hz),
-and resamples onto a regular grid of spacing ``dt`` (s, the unit's output interval):
+A log holds a time column (numbers in some time unit, or date-times in any common format),
+the four inputs and some or all of the nine outputs, in engineering units, sampled irregularly,
+with gaps. :func:`load_measurements` reads it with pandas, maps file columns to ids, converts
+to SI with pint (K, Pa absolute, kg/s, valve fraction, speed in rev/s = Hz), and resamples
+onto a regular grid of spacing ``dt`` (s, the unit's output interval):
 
-* every variable is interpolated linearly between its own valid (finite) samples, but never
-  across a *gap*: two consecutive valid samples more than ``max_gap`` seconds apart;
+* units come from ``units=``, from the header (``TD [degC]`` or ``TD (F)``) or from a row of
+  units right under the header; ``C`` and ``F`` mean °C and °F, a ``g`` suffix marks a gauge
+  pressure (``barg``, ``psig``, ``bar(g)``);
+* numbers may use a decimal comma (``decimal=","``, found by itself in ``;``- or
+  tab-separated files); date-times are parsed by pandas (ISO 8601, ``07/01/2024 02:00:00 PM``;
+  day first when written with dots, ``01.07.2024 14:00:00``; ``time_format=`` otherwise);
+* every variable is interpolated between its own valid (finite) samples, but never across a
+  *gap*: two consecutive valid samples more than ``max_gap`` seconds apart;
 * the simulator needs every input at every instant, so a gap in any input (or in the rows
   themselves) **cuts** the record into segments; one segment is kept (the longest, or the one
   asked for) and its time restarts at 0 s;
 * a gap in an output only **masks** that stretch: grid times where any loaded output has no
   data are left out of the observed Dataset (its ``time`` is then the simulation grid with
   holes; the KS distance compares value distributions, so it needs no regular times);
-* inputs are held piecewise constant (as :mod:`pymc_vcc.physics.inputs` profiles are) over blocks of
-  ``input_hold`` seconds, each block at the mean of its resampled values. The solver restarts
-  at every step of an input, so a short hold costs run time (built-in unit, 1060 s: ~0.3 s with
-  the 10 s default, ~2.5 s with a 1 s hold).
+* inputs are held piecewise constant (as :mod:`pymc_vcc.physics.inputs` profiles are) over blocks
+  of ``input_hold`` seconds, each block at the mean of its resampled values. The commanded
+  inputs (:data:`STEPPED_INPUTS`) are resampled by nearest sample, and each of their steps
+  starts a new block, so a step is never smeared over a block. The solver restarts at every
+  step of an input, so a short hold costs run time (built-in unit, 1060 s: ~0.3 s with the
+  10 s default, ~2.5 s with a 1 s hold).
 
 Everything dropped is listed in the :class:`MeasurementReport` returned beside the data.
 """
@@ -24,14 +33,19 @@ Everything dropped is listed in the :class:`MeasurementReport` returned beside t
 from __future__ import annotations
 
 import csv
+import itertools
 import math
+import re
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from functools import cache
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
+import pint
 import xarray as xr
 
 from pymc_vcc.io.plausibility import check_plausible
@@ -44,41 +58,9 @@ EXAMPLE_LOG = "example_log.csv"
 ATMOSPHERIC_PRESSURE = 101325.0
 """Default ambient pressure added to gauge pressures, Pa."""
 
-_LINEAR: dict[str, dict[str, tuple[float, float]]] = {
-    # quantity -> unit -> (scale, offset) with SI = value * scale + offset
-    "temperature": {
-        "K": (1.0, 0.0),
-        "degC": (1.0, 273.15),
-        "°C": (1.0, 273.15),
-        "C": (1.0, 273.15),
-        "degF": (5.0 / 9.0, 273.15 - 32.0 * 5.0 / 9.0),
-        "°F": (5.0 / 9.0, 273.15 - 32.0 * 5.0 / 9.0),
-    },
-    "pressure": {
-        "Pa": (1.0, 0.0),
-        "kPa": (1e3, 0.0),
-        "MPa": (1e6, 0.0),
-        "bar": (1e5, 0.0),
-        "psi": (6894.757293168, 0.0),
-    },
-    "mass_flow": {
-        "kg/s": (1.0, 0.0),
-        "g/s": (1e-3, 0.0),
-        "kg/min": (1.0 / 60.0, 0.0),
-        "kg/h": (1.0 / 3600.0, 0.0),
-        "lb/h": (0.45359237 / 3600.0, 0.0),
-    },
-    "fraction": {"1": (1.0, 0.0), "fraction": (1.0, 0.0), "%": (0.01, 0.0)},
-    "speed": {
-        "Hz": (1.0, 0.0),
-        "rps": (1.0, 0.0),
-        "1/s": (1.0, 0.0),
-        "rpm": (1.0 / 60.0, 0.0),
-        "1/min": (1.0 / 60.0, 0.0),
-    },
-}
-_GAUGE_SUFFIXES = ("(g)", "g")
-_ABSOLUTE_SUFFIXES = ("(a)", "a")
+STEPPED_INPUTS: tuple[str, ...] = ("valve_opening", "compressor_speed")
+"""Inputs a controller sets in steps: resampled by nearest sample, and held without averaging
+across a step (each step starts a new hold block)."""
 
 _QUANTITY: dict[str, str] = {
     "valve_opening": "fraction",
@@ -97,48 +79,99 @@ _QUANTITY: dict[str, str] = {
 }
 """The physical quantity of every input and output id."""
 
-_TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
-_MISSING = {"", "nan", "na", "n/a", "null", "none", "-"}
+_SI_UNIT = {
+    "temperature": "K",
+    "pressure": "Pa",
+    "mass_flow": "kg/s",
+    "fraction": "dimensionless",
+    "speed": "Hz",
+}
+_EXAMPLES = {
+    "temperature": "K, degC, °C, C, degF, °F, F",
+    "pressure": "Pa, kPa, MPa, bar, psi, atm; gauge: barg, bar(g), kPag, psig",
+    "mass_flow": "kg/s, g/s, kg/h, lb/min, lb/h",
+    "fraction": "1, %",
+    "speed": "Hz, rps, rpm, 1/min",
+}
+_ALIASES = {
+    "temperature": {"C": "degC", "F": "degF"},
+    "fraction": {"fraction": "dimensionless", "-": "dimensionless"},
+}
+_GAUGE_SUFFIXES = ("(g)", "g")
+_ABSOLUTE_SUFFIXES = ("(a)", "a")
+_MISSING = ("", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "none", "None", "-")
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
+_DOTTED_DATE = re.compile(r"^\s*\d{1,2}\.\d{1,2}\.\d{2,4}")
 
 
-def _allowed_units(quantity: str) -> list[str]:
-    units = list(_LINEAR[quantity])
-    if quantity == "pressure":
-        units += [u + "g" for u in ("bar", "kPa", "MPa", "psi")] + ["bar(g)", "bara", "bar(a)"]
-    return units
+@cache
+def _registry() -> pint.UnitRegistry:
+    """pint's registry with a revolution counted as 1, so that rpm / 60 = Hz = rev/s."""
+    registry = pint.UnitRegistry(on_redefinition="ignore")
+    registry.define("turn = 1 = revolution = cycle = rev")
+    return registry
+
+
+def _parse_unit(text: str, quantity: str) -> pint.Unit | None:
+    """The pint unit ``text`` names if it measures ``quantity``, else None."""
+    registry = _registry()
+    text = _ALIASES.get(quantity, {}).get(text, text)
+    try:
+        unit = registry.Unit(text)
+    except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError):
+        return None
+    target = registry.Unit(_SI_UNIT[quantity])
+    return unit if unit.dimensionality == target.dimensionality else None
 
 
 def unit_converter(
     unit: str, quantity: str, atmospheric_pressure: float = ATMOSPHERIC_PRESSURE
 ) -> Callable[[np.ndarray], np.ndarray]:
-    """A function converting values in ``unit`` to SI for ``quantity``.
+    """A function converting values in ``unit`` to SI for ``quantity`` (with pint).
 
-    Quantities: ``temperature`` (K, degC, degF), ``pressure`` (Pa, kPa, MPa, bar, psi, absolute;
-    a ``g`` or ``(g)`` suffix marks gauge, e.g. ``barg``: ``atmospheric_pressure`` Pa is added;
-    ``a``/``(a)`` marks absolute), ``mass_flow`` (kg/s, g/s, kg/min, kg/h, lb/h), ``fraction``
-    (1, %), ``speed`` (Hz, rps, rpm). Raises ``ValueError`` naming the allowed units.
+    Quantities and their SI units: ``temperature`` (K), ``pressure`` (Pa, absolute; a ``g`` or
+    ``(g)`` suffix marks gauge, e.g. ``barg``: ``atmospheric_pressure`` Pa is added; ``a`` or
+    ``(a)`` marks absolute), ``mass_flow`` (kg/s), ``fraction`` (1; ``%`` allowed), ``speed``
+    (Hz = rev/s; ``rpm`` allowed). Any unit pint knows of the right dimension is accepted;
+    ``C`` and ``F`` mean °C and °F. Raises ``ValueError`` naming examples of allowed units.
     """
-    table = _LINEAR[quantity]
     text = unit.strip()
+    parsed = _parse_unit(text, quantity)
     gauge = False
-    if quantity == "pressure" and text not in table:
+    if parsed is None and quantity == "pressure":
         for suffixes, is_gauge in ((_GAUGE_SUFFIXES, True), (_ABSOLUTE_SUFFIXES, False)):
             stem = next((text[: -len(s)] for s in suffixes if text.endswith(s)), None)
-            if stem is not None and stem.strip() in table:
-                text, gauge = stem.strip(), is_gauge
+            if stem and (parsed := _parse_unit(stem.strip(), "pressure")) is not None:
+                gauge = is_gauge
                 break
-    if text not in table:
+    if parsed is None:
         raise ValueError(
-            f"unknown {quantity} unit {unit!r}; allowed are {_allowed_units(quantity)}"
+            f"unknown {quantity} unit {unit!r}; allowed are units of {quantity} such as "
+            f"{_EXAMPLES[quantity]}"
         )
-    scale, offset = table[text]
-    if gauge:
-        offset += atmospheric_pressure
+    registry = _registry()
+    target = registry.Unit(_SI_UNIT[quantity])
+    offset = atmospheric_pressure if gauge else 0.0
 
     def convert(values: np.ndarray) -> np.ndarray:
-        return np.asarray(values, dtype=float) * scale + offset
+        magnitudes = np.asarray(values, dtype=float)
+        return registry.Quantity(magnitudes, parsed).to(target).magnitude + offset
 
     return convert
+
+
+def _time_unit_seconds(time_unit: str) -> float:
+    """Seconds in one ``time_unit`` (any pint unit of time: s, ms, min, h, ...)."""
+    registry = _registry()
+    try:
+        unit = registry.Unit(time_unit)
+    except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError):
+        unit = None
+    if unit is None or unit.dimensionality != registry.Unit("s").dimensionality:
+        raise ValueError(
+            f"unknown time_unit {time_unit!r}; allowed are units of time such as s, ms, min, h"
+        )
+    return float(registry.Quantity(1.0, unit).to("s").magnitude)
 
 
 @dataclass(frozen=True)
@@ -162,7 +195,7 @@ class MeasurementReport:
 
     Attributes:
         source: the file read.
-        n_rows: data rows in the file.
+        n_rows: data rows in the file (a units row not counted).
         time_origin: the first row's timestamp as written in the file.
         median_interval: median spacing of the rows, s.
         missing_values: file column -> number of empty or NaN cells.
@@ -173,6 +206,7 @@ class MeasurementReport:
         outputs: the output ids loaded.
         masked_points: output id -> grid points of ``kept`` where it has no data.
         n_grid: grid points of ``kept``; n_observed: those with every output (the observed time).
+        units: file column -> the unit it was read in.
     """
 
     source: str
@@ -188,6 +222,7 @@ class MeasurementReport:
     masked_points: dict[str, int] = field(default_factory=dict)
     n_grid: int = 0
     n_observed: int = 0
+    units: dict[str, str] = field(default_factory=dict)
 
     def __str__(self) -> str:
         lines = [
@@ -232,81 +267,161 @@ class Measurements:
     report: MeasurementReport
 
 
-def _read_table(path: Path) -> tuple[list[str], list[list[str]]]:
+@dataclass(frozen=True)
+class _Table:
+    """A log as read: stripped header names, text cells, the units row (if any) and the file
+    line number of the first data row."""
+
+    header: list[str]
+    cells: pd.DataFrame
+    units_row: dict[str, str]
+    first_line: int
+
+    def column(self, name: str) -> pd.Series:
+        return self.cells[self.header.index(name)]
+
+    def line(self, row: int) -> int:
+        """File line number (1-based) of data row ``row``."""
+        return self.first_line + row
+
+
+def _delimiter(path: Path) -> str:
     with path.open(newline="", encoding="utf-8-sig") as handle:
         sample = handle.read(4096)
-        handle.seek(0)
-        try:
-            dialect = csv.Sniffer().sniff(sample, delimiters=",;\t")
-        except csv.Error:
-            dialect = csv.excel
-        rows = [row for row in csv.reader(handle, dialect) if any(cell.strip() for cell in row)]
-    if len(rows) < 3:
+    try:
+        return csv.Sniffer().sniff(sample, delimiters=",;\t").delimiter
+    except csv.Error:
+        return ","
+
+
+def _read_table(path: Path) -> tuple[_Table, str]:
+    """The log's cells as text (pandas), and its delimiter."""
+    delimiter = _delimiter(path)
+    try:
+        frame = pd.read_csv(
+            path,
+            sep=delimiter,
+            header=None,
+            dtype=str,
+            keep_default_na=False,
+            skip_blank_lines=True,
+            encoding="utf-8-sig",
+        )
+    except pd.errors.ParserError as error:
+        raise ValueError(f"{path}: {str(error).strip()}") from None
+    except pd.errors.EmptyDataError:
+        frame = pd.DataFrame()
+    frame = frame.apply(lambda column: column.fillna("").str.strip())
+    frame = frame[frame.ne("").any(axis=1)]
+    if len(frame) < 3:
         raise ValueError(f"{path}: expected a header row and at least two data rows")
-    header = [cell.strip() for cell in rows[0]]
+    header = list(frame.iloc[0])
     if len(set(header)) != len(header):
         duplicates = sorted({name for name in header if header.count(name) > 1})
         raise ValueError(f"{path}: duplicate column name(s) {duplicates}")
-    for number, row in enumerate(rows[1:], start=2):
-        if len(row) != len(header):
-            raise ValueError(
-                f"{path}: line {number} has {len(row)} fields; the header has {len(header)}"
-            )
-    return header, rows[1:]
+    cells = frame.iloc[1:].reset_index(drop=True)
+    return _Table(header, cells, {}, 2), delimiter
 
 
-def _column_values(path: Path, name: str, cells: list[str]) -> np.ndarray:
-    values = np.empty(len(cells))
-    for k, cell in enumerate(cells):
-        text = cell.strip()
-        if text.lower() in _MISSING:
-            values[k] = np.nan
-            continue
-        try:
-            values[k] = float(text)
-        except ValueError:
-            raise ValueError(
-                f"{path}: column {name!r}, line {k + 2}: {text!r} is not a number"
-            ) from None
-    return values
-
-
-def _parse_times(path: Path, name: str, cells: list[str], time_unit: str) -> np.ndarray:
-    """Seconds since the first row (numbers in ``time_unit``, or ISO-8601 datetimes)."""
-    first = cells[0].strip()
+def _is_number(text: str, decimal: str) -> bool:
     try:
-        float(first)
-        numeric = True
+        float(text.replace(decimal, ".") if decimal != "." else text)
     except ValueError:
-        numeric = False
-    if numeric:
-        if time_unit not in _TIME_UNITS:
-            raise ValueError(f"unknown time_unit {time_unit!r}; allowed are {list(_TIME_UNITS)}")
-        seconds = _column_values(path, name, cells) * _TIME_UNITS[time_unit]
+        return False
+    return True
+
+
+def _split_units_row(table: _Table, value_columns: list[str], decimal: str) -> _Table:
+    """Take a row of units right under the header out of the data, if there is one: every
+    value column's first cell is text that is not a number (e.g. ``degC``, ``bar``)."""
+    first = [table.column(name).iloc[0] for name in value_columns]
+    if not all(cell and cell not in _MISSING and not _is_number(cell, decimal) for cell in first):
+        return table
+    units_row = {name: table.column(name).iloc[0] for name in table.header}
+    cells = table.cells.iloc[1:].reset_index(drop=True)
+    if len(cells) < 2:
+        raise ValueError("expected at least two data rows under the units row")
+    return _Table(table.header, cells, units_row, table.first_line + 1)
+
+
+def _infer_decimal(table: _Table, value_columns: list[str], delimiter: str) -> str:
+    """``","`` if the file is not comma-separated and its numbers are written ``27,5``."""
+    if delimiter == ",":
+        return "."
+    sample = pd.concat([table.column(name).head(50) for name in value_columns])
+    return "," if sample.str.match(_DECIMAL_COMMA).any() else "."
+
+
+def _column_values(path: Path, table: _Table, name: str, decimal: str) -> np.ndarray:
+    """The numbers of file column ``name`` (NaN where empty); a non-number is an error."""
+    text = table.column(name)
+    missing = text.isin(_MISSING)
+    normalised = text.str.replace(decimal, ".", regex=False) if decimal != "." else text
+    values = pd.to_numeric(normalised.where(~missing), errors="coerce")
+    bad = np.flatnonzero(values.isna() & ~missing)
+    if bad.size:
+        row = int(bad[0])
+        raise ValueError(
+            f"{path}: column {name!r}, line {table.line(row)}: {text.iloc[row]!r} is not a number"
+            + (" (set decimal=',' for decimal commas)" if "," in text.iloc[row] else "")
+        )
+    return values.to_numpy(dtype=float)
+
+
+def _parse_times(
+    path: Path,
+    table: _Table,
+    name: str,
+    time_unit: str,
+    time_format: str | None,
+    decimal: str,
+) -> np.ndarray:
+    """Seconds since the first row: numbers in ``time_unit``, or date-times parsed by pandas
+    (``time_format`` if given, else ISO 8601 or the format pandas infers; day first when the
+    date is written with dots). Zone-less date-times are taken as UTC."""
+    cells = table.column(name)
+    if _is_number(cells.iloc[0], decimal):
+        scale = _time_unit_seconds(time_unit)
+        seconds = _column_values(path, table, name, decimal) * scale
     else:
-        seconds = np.empty(len(cells))
-        for k, cell in enumerate(cells):
-            try:
-                stamp = datetime.fromisoformat(cell.strip())
-            except ValueError:
-                raise ValueError(
-                    f"{path}: time column {name!r}, line {k + 2}: {cell!r} is neither a number "
-                    "nor an ISO-8601 datetime (e.g. 2024-07-01T14:03:07)"
-                ) from None
-            if stamp.tzinfo is None:
-                stamp = stamp.replace(tzinfo=UTC)
-            seconds[k] = stamp.timestamp()
+        stamps = _datetimes(cells, time_format)
+        bad = np.flatnonzero(stamps.isna())
+        if bad.size:
+            row = int(bad[0])
+            hint = "" if time_format else "; give time_format= (e.g. '%d/%m/%Y %H:%M:%S')"
+            raise ValueError(
+                f"{path}: time column {name!r}, line {table.line(row)}: {cells.iloc[row]!r} is "
+                f"neither a number nor a date-time"
+                + (f" in the format {time_format!r}" if time_format else hint)
+            )
+        nanoseconds = stamps.to_numpy(dtype="datetime64[ns]").astype(np.int64)
+        seconds = (nanoseconds - nanoseconds[0]) / 1e9
     if not np.all(np.isfinite(seconds)):
-        line = int(np.argmin(np.isfinite(seconds))) + 2
-        raise ValueError(f"{path}: time column {name!r} is empty or NaN on line {line}")
+        row = int(np.argmin(np.isfinite(seconds)))
+        raise ValueError(f"{path}: time column {name!r} is empty or NaN on line {table.line(row)}")
     steps = np.diff(seconds)
     if not np.all(steps > 0):
         k = int(np.argmin(steps > 0)) + 1
         raise ValueError(
-            f"{path}: time must be strictly increasing; line {k + 2} ({cells[k].strip()!r}) "
-            f"does not come after line {k + 1} ({cells[k - 1].strip()!r})"
+            f"{path}: time must be strictly increasing; line {table.line(k)} "
+            f"({cells.iloc[k]!r}) does not come after line {table.line(k - 1)} "
+            f"({cells.iloc[k - 1]!r})"
         )
     return seconds - seconds[0]
+
+
+def _datetimes(cells: pd.Series, time_format: str | None) -> pd.Series:
+    """Date-times (UTC) of ``cells``, NaT where they do not parse."""
+    if time_format is not None:
+        return pd.to_datetime(cells, format=time_format, utc=True, errors="coerce")
+    iso = pd.to_datetime(cells, format="ISO8601", utc=True, errors="coerce")
+    if not iso.isna().any():
+        return iso
+    dayfirst = bool(_DOTTED_DATE.match(cells.iloc[0]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "could not infer format": per element
+        inferred = pd.to_datetime(cells, dayfirst=dayfirst, utc=True, errors="coerce")
+    return inferred if inferred.isna().sum() < iso.isna().sum() else iso
 
 
 def _gaps(variable: str, times: np.ndarray, max_gap: float) -> list[Gap]:
@@ -330,16 +445,22 @@ def _segments(start: float, end: float, gaps: list[Gap]) -> list[tuple[float, fl
 
 
 def _resample(
-    times: np.ndarray, values: np.ndarray, grid: np.ndarray, max_gap: float
+    times: np.ndarray, values: np.ndarray, grid: np.ndarray, max_gap: float, *, stepped: bool
 ) -> np.ndarray:
-    """Linear interpolation of the valid samples on ``grid``; NaN outside them or in gaps."""
+    """The valid samples on ``grid`` (pandas): linear in time, or the nearest sample if
+    ``stepped``; NaN outside the samples and inside gaps longer than ``max_gap``."""
     valid = np.isfinite(values)
-    t, v = times[valid], values[valid]
-    result = np.full(grid.size, np.nan)
-    if t.size == 0:
-        return result
-    inside = (grid >= t[0]) & (grid <= t[-1])
-    result[inside] = np.interp(grid[inside], t, v)
+    samples = pd.Series(values[valid], index=times[valid])
+    if samples.empty:
+        return np.full(grid.size, np.nan)
+    if stepped:
+        result = samples.reindex(grid, method="nearest").to_numpy(dtype=float, copy=True)
+    else:
+        union = samples.reindex(samples.index.union(grid))
+        interpolated = union.interpolate(method="index", limit_area="inside")
+        result = interpolated.reindex(grid).to_numpy(dtype=float, copy=True)
+    t = samples.index.to_numpy()
+    result[(grid < t[0]) | (grid > t[-1])] = np.nan
     right = np.clip(np.searchsorted(t, grid, side="right"), 1, max(t.size - 1, 1))
     left = right - 1
     in_gap = (t[right] - t[left] > max_gap) & (grid > t[left]) & (grid < t[right])
@@ -347,19 +468,49 @@ def _resample(
     return result
 
 
+def _block_starts(resampled: dict[str, np.ndarray], per_block: int) -> np.ndarray:
+    """Grid indices where hold blocks start: every ``per_block`` points from each step of a
+    stepped input (and from 0); a last block shorter than half a block joins the one before."""
+    n_grid = next(iter(resampled.values())).size
+    steps = {0}
+    for name in STEPPED_INPUTS:
+        steps.update((np.flatnonzero(np.diff(resampled[name][:-1]) != 0) + 1).tolist())
+    edges = [*sorted(steps), n_grid - 1]
+    starts = []
+    for first, end in itertools.pairwise(edges):
+        piece = list(range(first, end, per_block))
+        if len(piece) > 1 and end - piece[-1] < per_block / 2:
+            piece.pop()
+        starts += piece
+    return np.asarray(starts)
+
+
 def _held_inputs(resampled: dict[str, np.ndarray], dt: float, hold: float) -> xr.Dataset:
     n_grid = next(iter(resampled.values())).size
-    per_block = max(1, round(hold / dt))
-    starts = np.arange(0, n_grid - 1, per_block)
+    starts = _block_starts(resampled, max(1, round(hold / dt)))
+    lengths = np.diff(np.append(starts, n_grid - 1))
     values = {
-        name: np.append(
-            np.add.reduceat(series[:-1], starts) / np.diff(np.append(starts, n_grid - 1)),
-            series[-1],
-        )
+        name: np.append(np.add.reduceat(series[:-1], starts) / lengths, series[-1])
         for name, series in resampled.items()
     }
     time = np.append(starts * dt, (n_grid - 1) * dt)
     return make_inputs(time, **values)
+
+
+def _split_header_unit(column: str) -> tuple[str, str | None]:
+    """``"TD [degC]"`` or ``"TD (F)"`` -> (``"TD"``, unit); a bare name -> (name, None)."""
+    closing = {"]": "[", ")": "("}.get(column[-1:]) if column else None
+    if closing is None:
+        return column, None
+    depth = 0
+    for position in range(len(column) - 1, -1, -1):
+        char = column[position]
+        depth += char == column[-1]
+        depth -= char == closing
+        if depth == 0:
+            name, unit = column[:position].strip(), column[position + 1 : -1].strip()
+            return (name, unit) if name and unit else (column, None)
+    return column, None
 
 
 def load_measurements(
@@ -369,6 +520,8 @@ def load_measurements(
     *,
     time_column: str = "time",
     time_unit: str = "s",
+    time_format: str | None = None,
+    decimal: str | None = None,
     dt: float = 1.0,
     max_gap: float = 30.0,
     input_hold: float = 10.0,
@@ -378,17 +531,24 @@ def load_measurements(
     """Load a measured CSV log as simulator inputs and observed outputs in SI units.
 
     Args:
-        path: CSV file (``,``, ``;`` or tab separated) with a header row.
+        path: CSV file (``,``, ``;`` or tab separated) with a header row, optionally followed by
+            a row of units.
         columns: file column -> id, one for each of the four inputs (:data:`INPUT_IDS`) and at
             least one output (:data:`~pymc_vcc.physics.cycles.OUTPUT_IDS`); other file columns are
-            ignored.
-        units: file column -> unit (see :func:`unit_converter`); a column missing here may carry
-            its unit in its header, ``"name [unit]"``.
-        time_column: the file column of the timestamps: numbers in ``time_unit`` (s, ms, min, h)
-            or ISO-8601 datetimes (time zone: UTC unless written).
+            ignored. A file column may be named with or without its header unit.
+        units: file column -> unit (see :func:`unit_converter`); a column missing here carries
+            its unit in its header (``"name [unit]"`` or ``"name (unit)"``) or in the units row.
+        time_column: the file column of the timestamps: numbers in ``time_unit`` or date-times.
+        time_unit: unit of numeric timestamps (any unit of time: s, ms, min, h).
+        time_format: ``strftime`` format of the date-times (e.g. ``"%d/%m/%Y %H:%M:%S"``);
+            default: ISO 8601 or the format pandas infers from the first row (US month first
+            with slashes, day first with dots). Zone-less times are taken as UTC.
+        decimal: the decimal mark (``"."`` or ``","``); default: ``","`` if the file is not
+            comma-separated and its numbers are written with a comma, else ``"."``.
         dt: spacing of the simulation grid, s (the unit's ``solver.output_interval``).
         max_gap: longest stretch without samples that interpolation may bridge, s.
-        input_hold: inputs are held constant over blocks of this length, s (a multiple of dt).
+        input_hold: inputs are held constant over blocks of this length, s (a multiple of dt);
+            a step of a commanded input (:data:`STEPPED_INPUTS`) starts a new block.
         segment: which gap-free input segment to keep (0 = first; default: the longest).
         atmospheric_pressure: added to gauge pressures, Pa.
 
@@ -398,8 +558,8 @@ def load_measurements(
     Raises:
         FileNotFoundError: no such file.
         ValueError: missing columns or inputs, unknown ids or units, non-numeric cells,
-            non-monotonic time, an output without data, inputs outside their allowed range,
-            no segment of at least two grid steps.
+            unparseable or non-monotonic time, an output without data, inputs outside their
+            allowed range, no segment of at least two grid steps.
     """
     path = Path(path)
     if not path.is_file():
@@ -409,16 +569,8 @@ def load_measurements(
             raise ValueError(f"{name} must be a positive number of seconds, got {value!r}")
     if max_gap < dt:
         raise ValueError(f"max_gap = {max_gap} s must be at least dt = {dt} s")
-    header, rows = _read_table(path)
-    bare = {_strip_unit(name): name for name in header}
-
-    def find(column: str) -> str:
-        if column in header:
-            return column
-        if column in bare:
-            return bare[column]
-        raise ValueError(f"{path}: column {column!r} not found; the file has columns {header}")
-
+    if decimal not in (None, ".", ","):
+        raise ValueError(f"decimal must be '.' or ',' (or None to infer it), got {decimal!r}")
     ids = list(columns.values())
     known = set(INPUT_IDS) | set(OUTPUT_IDS)
     unknown = [name for name in ids if name not in known]
@@ -437,31 +589,57 @@ def load_measurements(
     if not outputs:
         raise ValueError(f"columns must map at least one output of {list(OUTPUT_IDS)}")
 
+    table, delimiter = _read_table(path)
+    bare = {_split_header_unit(name)[0]: name for name in table.header}
+
+    def find(column: str) -> str:
+        if column in table.header:
+            return column
+        if column in bare:
+            return bare[column]
+        raise ValueError(
+            f"{path}: column {column!r} not found; the file has columns {table.header}"
+        )
+
+    file_columns = {column: find(column) for column in columns}
     time_name = find(time_column)
-    time_index = header.index(time_name)
-    times = _parse_times(path, time_name, [row[time_index] for row in rows], time_unit)
-    units = dict(units or {})
+    value_columns = list(file_columns.values())
+    try:
+        table = _split_units_row(table, value_columns, decimal or ".")
+    except ValueError as error:
+        raise ValueError(f"{path}: {error}") from None
+    decimal = decimal or _infer_decimal(table, value_columns, delimiter)
+    times = _parse_times(path, table, time_name, time_unit, time_format, decimal)
+
+    given_units = dict(units or {})
     raw: dict[str, np.ndarray] = {}
     missing_values: dict[str, int] = {}
+    read_units: dict[str, str] = {}
     for column, variable in columns.items():
-        file_column = find(column)
-        unit = units.get(column, units.get(file_column, _header_unit(file_column)))
+        file_column = file_columns[column]
+        unit = (
+            given_units.get(column)
+            or given_units.get(file_column)
+            or _split_header_unit(file_column)[1]
+            or table.units_row.get(file_column)
+        )
+        quantity = _QUANTITY[variable]
         if unit is None:
             raise ValueError(
                 f"{path}: no unit for column {column!r} ({variable}); give units={{{column!r}: "
-                f"...}} from {_allowed_units(_QUANTITY[variable])}"
+                f"...}} with a unit of {quantity} such as {_EXAMPLES[quantity]}"
             )
         try:
-            convert = unit_converter(unit, _QUANTITY[variable], atmospheric_pressure)
+            convert = unit_converter(unit, quantity, atmospheric_pressure)
         except ValueError as error:
             raise ValueError(f"{path}: column {column!r} ({variable}): {error}") from None
-        index = header.index(file_column)
-        values = _column_values(path, file_column, [row[index] for row in rows])
+        values = _column_values(path, table, file_column, decimal)
         missing_values[column] = int(np.isnan(values).sum())
         if missing_values[column] == values.size:
             raise ValueError(f"{path}: column {column!r} ({variable}) has no values (all empty)")
         raw[variable] = convert(values)
         check_plausible(variable, column, raw[variable], unit)
+        read_units[column] = unit
 
     row_gaps = _gaps("rows", times, max_gap)
     outages = {(gap.start, gap.end) for gap in row_gaps}
@@ -493,13 +671,18 @@ def load_measurements(
     grid = np.arange(0.0, kept[1] - kept[0] + 1e-9, dt)
     absolute = kept[0] + grid
 
-    resampled_inputs = {name: _resample(times, raw[name], absolute, max_gap) for name in INPUT_IDS}
+    resampled_inputs = {
+        name: _resample(times, raw[name], absolute, max_gap, stepped=name in STEPPED_INPUTS)
+        for name in INPUT_IDS
+    }
     try:
         inputs = _held_inputs(resampled_inputs, dt, input_hold)
     except ValueError as error:
         raise ValueError(f"{path}: {error}") from None
 
-    observed_values = {name: _resample(times, raw[name], absolute, max_gap) for name in outputs}
+    observed_values = {
+        name: _resample(times, raw[name], absolute, max_gap, stepped=False) for name in outputs
+    }
     for name, series in observed_values.items():
         if not np.isfinite(series).any():
             raise ValueError(
@@ -522,8 +705,8 @@ def load_measurements(
     inputs.attrs.update({"source": str(path), "t_offset": kept[0]})
     report = MeasurementReport(
         source=str(path),
-        n_rows=len(rows),
-        time_origin=rows[0][time_index].strip(),
+        n_rows=len(table.cells),
+        time_origin=table.column(time_name).iloc[0],
         median_interval=float(np.median(np.diff(times))),
         missing_values=missing_values,
         gaps=tuple(sorted(row_gaps + input_gaps + output_gaps, key=lambda g: g.start)),
@@ -534,18 +717,9 @@ def load_measurements(
         masked_points={name: int((~np.isfinite(s)).sum()) for name, s in observed_values.items()},
         n_grid=int(grid.size),
         n_observed=int(complete.sum()),
+        units=read_units,
     )
     return Measurements(inputs=inputs, observed=observed, report=report)
-
-
-def _strip_unit(column: str) -> str:
-    return column.split("[", 1)[0].strip() if column.endswith("]") else column
-
-
-def _header_unit(column: str) -> str | None:
-    if column.endswith("]") and "[" in column:
-        return column[:-1].split("[", 1)[1].strip()
-    return None
 
 
 EXAMPLE_COLUMNS: dict[str, str] = {

@@ -5,8 +5,9 @@ from the first (system-to-system variability or slow drift). Each drives the mod
 2120 s input profile; the first 1060 s are the calibration data. Dataset 1 is calibrated for
 all 26 parameters and the output-noise scales with a uniform prior, dataset 2 with the Gaussian
 mixture fitted to dataset 1's posterior (Algorithm 1). Posterior predictives cover the whole
-2120 s, and dataset 2 is also simulated with dataset 1's true parameters (the uncalibrated
-model of Fig. 8).
+2120 s, without the output noise (their bands show what the parameters leave uncertain, not
+the jagged median of noisy draws), and dataset 2 is also simulated with dataset 1's true
+parameters (the uncalibrated model of Fig. 8).
 
 Two samplers (``method``): the paper's two-phase ABC rejection (Table I's budget), or PyMC's
 SMC-ABC on the same KS distance with a Gaussian kernel of width ε, all particles of a stage
@@ -25,7 +26,7 @@ import xarray as xr
 
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.noise import with_noise
-from pymc_vcc.inference.predictive import sample_posterior_predictive
+from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
@@ -230,11 +231,12 @@ def estimation_study(
                 **settings.rejection_options(),
             )
         predictive = [
-            sample_posterior_predictive(
+            simulate_predictive(
                 tree,
                 full,
                 reference=reference,
                 max_draws=settings.work.predictive_draws,
+                noise=False,
                 executor=executor,
                 seed=seed,
                 time_limit_s=settings.time_limit,
@@ -265,7 +267,7 @@ def _write(
     t_calibration: float,
     settings: StudySettings,
 ) -> list[str]:
-    out = settings.out / "estimate"
+    out = settings.out
     out.mkdir(parents=True, exist_ok=True)
     files = [out / "calibration.nc", out / "summary.json"]
     write_netcdf(result.calibration.to_datatree(), files[0])
@@ -277,12 +279,21 @@ def _write(
         write_netcdf(tree, path)
         files.append(path)
         ordered = [*SENSITIVE, *(name for name in truth if name not in SENSITIVE)]
-        kde = plot_prior_posterior(tree, ordered, truth=truth, long_names=long_names)
+        kde = plot_prior_posterior(
+            tree,
+            ordered,
+            truth=truth,
+            long_names=long_names,
+            uniform={spec.id: (spec.low, spec.high) for spec in unit.parameters}
+            if k == 0
+            else None,
+        )
         files += save_figure(kde, out / f"fig{5 if k == 0 else 7}_kde_dataset{k + 1}")
         ppd = plot_predictive(
             tree,
             calibration_end=t_calibration,
             uncalibrated=result.uncalibrated if k == 1 else None,
+            reference_label="truth",
         )
         files += save_figure(ppd, out / f"fig{6 if k == 0 else 8}_predictive_dataset{k + 1}")
     return [str(path) for path in files]

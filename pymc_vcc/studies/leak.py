@@ -17,6 +17,7 @@ import numpy as np
 import pymc as pm
 import xarray as xr
 
+from pymc_vcc.execution.progress import progress_enabled
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
@@ -136,7 +137,7 @@ def _calibrate(
             executor=executor,
             random_seed=int(seed.generate_state(1)[0]),
             checkpoint=settings.checkpoint(f"leak_smc_{stage}"),
-            progressbar=bool(settings.progress),
+            progressbar=progress_enabled(settings.progress),
         )
     stats = tree["sample_stats"]
     return tree, int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
@@ -217,7 +218,7 @@ def leak_study(
 
 
 def _write(result: LeakResult, settings: StudySettings) -> list[str]:
-    out = settings.out / "leak"
+    out = settings.out
     out.mkdir(parents=True, exist_ok=True)
     files = []
     for stage, tree in enumerate(result.trees):

@@ -80,7 +80,7 @@ def sobol_study(
         )
     result = SobolResult(indices, time.perf_counter() - started)
     if settings.out is not None:
-        out = settings.out / "sobol"
+        out = settings.out
         write_netcdf(indices, out / "sobol_indices.nc")
         write_json(out / "summary.json", result.summary())
         files = [out / "sobol_indices.nc", out / "summary.json"]

@@ -20,15 +20,16 @@ parallel batch.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 import pymc as pm
 import pytensor.tensor as pt
+from pymc.distributions import simulator as pymc_simulator
 from pymc.distributions.shape_utils import rv_size_is_none
 from pymc.logprob.transforms import Transform
-from pytensor.graph.basic import Apply
+from pytensor.graph.basic import Apply, Variable
 from pytensor.graph.op import Op
 from pytensor.tensor.variable import TensorVariable
 
@@ -252,6 +253,11 @@ def prior_variables(prior: Prior, *, joint_name: str = "theta") -> dict[str, Ten
     raise TypeError(f"prior must be a UniformPrior or a GMMPrior, got {type(prior).__name__}")
 
 
+def _known_bounds(simulator: Simulator) -> dict[str, tuple[float, float]]:
+    """Every parameter bound the simulator knows (its ``bounds``; none if it has none)."""
+    return check_simulator(simulator).bounds or {}
+
+
 def simulator_bounds(
     simulator: Simulator, parameters: Sequence[str] | None = None
 ) -> dict[str, tuple[float, float]]:
@@ -266,12 +272,12 @@ def simulator_bounds(
             ``parameter_names`` if it has them, else all).
     """
     info = check_simulator(simulator)
-    if info.bounds is None:
+    available = info.bounds or {}
+    if not available:
         raise ValueError(
             f"{type(simulator).__name__} has neither `bounds` nor a unit description; "
             "pass prior= explicitly"
         )
-    available = info.bounds
     if parameters is None:
         parameters = info.parameter_names or list(available)
     if isinstance(parameters, str):
@@ -282,25 +288,192 @@ def simulator_bounds(
     return {name: available[name] for name in parameters}
 
 
+DISTANCES = ("ks", "gaussian", "laplace")
+"""Distance names :func:`add_simulator` accepts: the paper's KS distance and PyMC's kernels."""
+
+SUM_STATS = ("identity", "sort", "mean", "median")
+"""PyMC's summary statistic names, with PyMC's meaning."""
+
+PRIOR_CHECK_DRAWS = 2000
+"""Prior draws of a user's PyMC variable checked against the bounds of its parameter."""
+
+
+def _zero_likelihood_if_failed(log_kernel):
+    """−inf (zero likelihood) where a failed run left NaN outputs, instead of NaN."""
+    return pt.switch(pt.isnan(log_kernel), -np.inf, log_kernel)
+
+
+def gaussian_kernel(epsilon, observed, simulated):
+    """PyMC's ``"gaussian"`` distance −½ ((obs − sim)/ε)², elementwise; −inf for a failed run."""
+    return _zero_likelihood_if_failed(pymc_simulator.gaussian(epsilon, observed, simulated))
+
+
+def laplace_kernel(epsilon, observed, simulated):
+    """PyMC's ``"laplace"`` distance −|obs − sim|/ε, elementwise; −inf for a failed run."""
+    return _zero_likelihood_if_failed(pymc_simulator.laplace(epsilon, observed, simulated))
+
+
+_PYMC_KERNELS = {"gaussian": gaussian_kernel, "laplace": laplace_kernel}
+
+
+def _distance_op(
+    distance: str | BatchDistance, sum_stat: str | Callable, observed: ObservedData
+) -> tuple[Op | Callable, str | Callable]:
+    """The ``distance`` and ``sum_stat`` to give ``pm.Simulator``, checked on ``observed``.
+
+    ``"ks"`` and batch callables ``(sims (N, n_outputs, m), obs (n_outputs, n)) -> (N,)`` compare
+    whole series, so only the order-free statistics ``identity`` and ``sort`` suit them; PyMC's
+    ``"gaussian"`` and ``"laplace"`` take every ``sum_stat`` of PyMC.
+    """
+    if isinstance(distance, str):
+        if distance not in DISTANCES:
+            hint = " (PyMC does not implement it yet)" if distance == "kullback_leibler" else ""
+            raise ValueError(
+                f"distance {distance!r} is not available{hint}; use one of {list(DISTANCES)} "
+                "or a batch distance (sims (N, n_outputs, m), obs (n_outputs, n)) -> (N,)"
+            )
+    elif not callable(distance):
+        raise TypeError(f"distance must be a name or a callable, got {type(distance).__name__}")
+    if isinstance(sum_stat, str) and sum_stat not in SUM_STATS:
+        raise ValueError(
+            f"sum_stat {sum_stat!r} is not available; use one of {list(SUM_STATS)} or a callable"
+        )
+    if distance in _PYMC_KERNELS:
+        return _PYMC_KERNELS[distance], sum_stat
+    if sum_stat not in ("identity", "sort"):
+        raise ValueError(
+            f"sum_stat {sum_stat!r} does not suit distance "
+            f"{getattr(distance, '__name__', distance)!r}, which compares whole series; use "
+            "'identity' or 'sort', or distance='gaussian' or 'laplace' with this statistic"
+        )
+    batch = ks_distances if distance == "ks" else distance
+    _check_batch_distance(batch, observed)
+    return DistanceKernel(batch), sum_stat
+
+
+def _check_batch_distance(distance: BatchDistance, observed: ObservedData) -> None:
+    """Refuse a batch distance that does not give one finite number per simulation."""
+    name = getattr(distance, "__name__", type(distance).__name__)
+    sims = np.stack([observed.values, observed.values])
+    try:
+        result = np.asarray(distance(sims, observed.values), dtype=float)
+    except Exception as error:
+        raise ValueError(
+            f"distance {name} fails on the observed data itself (sims of shape {sims.shape}, obs "
+            f"{observed.values.shape}): {type(error).__name__}: {error}"
+        ) from None
+    if result.shape != (2,) or not np.isfinite(result).all():
+        raise ValueError(
+            f"distance {name} must return one finite number per simulation: for sims of shape "
+            f"{sims.shape} it returned {result.shape if result.shape != (2,) else result}, "
+            "expected shape (2,)"
+        )
+
+
+def _check_outputs_produced(simulator: Simulator, observed: ObservedData) -> None:
+    """Refuse observed outputs that the simulator does not produce (when it names them)."""
+    produced = check_simulator(simulator).output_names
+    if produced is None:
+        return
+    missing = [name for name in observed.names if name not in produced]
+    if missing:
+        raise ValueError(
+            f"observed output(s) {missing} are not produced by the simulator, which gives "
+            f"{list(produced)}; choose outputs= among them (or simulate those outputs)"
+        )
+
+
+def _check_within_bounds(
+    name: str, variable: TensorVariable, bounds: tuple[float, float] | None
+) -> None:
+    """Refuse a user's prior variable that is not a scalar or puts mass outside ``bounds``."""
+    if not isinstance(variable, TensorVariable) or variable.ndim != 0:
+        shape = getattr(getattr(variable, "type", None), "shape", type(variable).__name__)
+        raise ValueError(
+            f"prior of {name!r} must be a scalar PyMC variable, got shape {shape}; index a "
+            f"vector variable, e.g. theta[0]"
+        )
+    draws = np.asarray(pm.draw(variable, draws=PRIOR_CHECK_DRAWS, random_seed=0), dtype=float)
+    if bounds is None:
+        return
+    low, high = bounds
+    outside = float(np.mean((draws < low) | (draws > high)))
+    if outside > 0:
+        raise ValueError(
+            f"prior of {name!r} puts {outside:.1%} of its draws outside the bounds "
+            f"[{low:g}, {high:g}] of the parameter (draws from {draws.min():.4g} to "
+            f"{draws.max():.4g}); truncate it, e.g. pm.TruncatedNormal(..., lower={low:g}, "
+            f"upper={high:g})"
+        )
+
+
+def _prior_parts(
+    prior: Prior | Mapping | None,
+    simulator: Simulator,
+    parameters: Sequence[str] | None,
+    model: pm.Model,
+) -> tuple[dict[str, TensorVariable], Prior | None]:
+    """Split ``prior`` into the user's PyMC variables (name -> variable) and a box or GMM
+    prior for the other calibrated names (None when every name has a variable)."""
+    if isinstance(prior, Prior):
+        return {}, prior
+    if prior is not None and not isinstance(prior, Mapping):
+        raise TypeError(
+            "prior must be a UniformPrior, a GMMPrior or a mapping name -> (low, high) or PyMC "
+            f"variable, got {type(prior).__name__}"
+        )
+    entries = dict(prior or {})
+    offered = check_simulator(simulator).parameter_names or list(_known_bounds(simulator))
+    declared = [n for n in offered if n in model.named_vars and n not in entries]
+    if parameters is not None:
+        names = list(parameters)
+    elif entries:
+        names = [*entries, *declared]
+    else:
+        names = list(simulator_bounds(simulator))
+    given = {n: v for n, v in entries.items() if isinstance(v, Variable)}
+    given.update({n: model[n] for n in names if n in declared})
+    rest = [n for n in names if n not in given]
+    bounds = {n: entries[n] for n in rest if n in entries}
+    missing = [n for n in rest if n not in bounds]
+    if missing:
+        bounds.update(simulator_bounds(simulator, missing))
+    return given, UniformPrior({n: bounds[n] for n in rest}) if rest else None
+
+
+def _with_noise_bounds(
+    prior: Prior | None, noise: Mapping | None, outputs: Sequence[str]
+) -> Prior | None:
+    if prior is not None:
+        return with_noise(prior, noise, outputs)
+    if not noise:
+        return None
+    scales = {noise_parameter(out): tuple(map(float, pair)) for out, pair in noise.items()}
+    return with_noise(UniformPrior(scales), noise, outputs)  # with_noise checks the bounds
+
+
 @dataclass(frozen=True)
 class SimulatorNode:
     """What :func:`add_simulator` added to the model.
 
     Attributes:
         variable: the ``pm.Simulator`` random variable (observed).
-        prior: the prior over every calibrated name (parameters and noise scales).
+        prior: the box or GMM prior of the names without a user's PyMC variable (None if
+            every calibrated name has one).
         parameter_names: simulator parameters calibrated, in the order the simulator gets them.
         noise_outputs: outputs with a noise scale ``nu_<output>``.
         observed: the validated observed data.
         function: the node's random function (runs one simulation).
+        variables: every calibrated name (parameters and noise scales) -> its PyMC variable.
     """
 
     variable: TensorVariable
-    prior: Prior
+    prior: Prior | None
     parameter_names: tuple[str, ...]
     noise_outputs: tuple[str, ...]
     observed: ObservedData
     function: SimulatorFunction
+    variables: Mapping[str, TensorVariable]
 
 
 def add_simulator(
@@ -309,62 +482,82 @@ def add_simulator(
     observed: OutputData,
     *,
     parameters: Sequence[str] | None = None,
-    prior: Prior | Bounds | None = None,
+    prior: Prior | Mapping[str, tuple[float, float] | TensorVariable] | None = None,
     outputs: Sequence[str] | None = None,
     noise: Bounds | tuple[float, float] | None = None,
     epsilon: float = 0.05,
-    distance: BatchDistance = ks_distances,
+    distance: str | BatchDistance = "ks",
+    sum_stat: str | Callable = "identity",
     time_limit_s: float | None = None,
 ) -> SimulatorNode:
     """Add ``simulator`` to the current PyMC model as a ``pm.Simulator`` named ``name``.
+
+    Everything is checked here, before any sampling: observed outputs the simulator does not
+    produce, parameters it lacks, a distance that does not give one number per simulation, and
+    user priors with mass outside the parameter bounds (refused, not truncated: a prior is what
+    the user says it is).
 
     Args:
         name: name of the observed node (its coords are ``<name>_output``, ``<name>_time``).
         simulator: ``simulator(theta, rng) -> Dataset | array (outputs, time)``, picklable.
         observed: observed outputs (Dataset with one variable per output, or an array).
-        parameters: simulator parameters to calibrate (default: all those of ``prior``, or of
-            the simulator's bounds / unit description when ``prior`` is None); the others keep
-            the simulator's nominal values.
+        parameters: simulator parameters to calibrate (default: all those named in ``prior``,
+            or those of the simulator's bounds / unit description when ``prior`` is None); the
+            others keep the simulator's nominal values.
         prior: a :class:`UniformPrior`, a :class:`GMMPrior` (e.g. the fitted posterior of the
-            previous dataset; its names may include noise scales ``nu_<output>``) or bounds
-            name -> (low, high). Default: uniform on the simulator's bounds.
+            previous dataset; its names may include noise scales ``nu_<output>``), or a mapping
+            name -> (low, high) or PyMC variable already in the model (any distribution, e.g.
+            ``pm.TruncatedNormal`` or an entry of :func:`gmm_prior_variable`), mixed freely. A
+            model variable that bears the name of a simulator parameter is that parameter's
+            prior (and calibrates it); any other parameter without an entry gets a uniform
+            prior on the simulator's bounds. A PyMC variable
+            must stay within the simulator's bounds of its parameter (checked on
+            :data:`PRIOR_CHECK_DRAWS` draws); an unnamed expression (``theta[0]``) becomes a
+            ``pm.Deterministic`` named as the parameter, so the posterior holds it by name.
         outputs: outputs compared (default: all outputs of ``observed``).
         noise: bounds of uniform priors on the noise scales ν: one pair for every output or a
             mapping output -> (low, high); None: no noise (unless ``prior`` names them).
-        epsilon: width ε of the Gaussian kernel −½ (d/ε)², in distance units (KS: [0, 1]).
-        distance: batch distance ``(sims (N, n_out, m), obs (n_out, n)) -> (N,)``.
+        epsilon: width ε of the kernel, in distance units (KS: [0, 1]).
+        distance: ``"ks"`` (the paper's KS distance averaged over outputs, with the Gaussian
+            kernel −½ (d/ε)²), PyMC's ``"gaussian"`` or ``"laplace"`` (elementwise kernels of
+            the summary statistics, PyMC's meaning: simulated and observed series on the same
+            grid), or a batch distance ``(sims (N, n_out, m), obs (n_out, n)) -> (N,)``.
+        sum_stat: PyMC's summary statistic (``"identity"``, ``"sort"``, ``"mean"``,
+            ``"median"`` or a callable), applied to simulated and observed outputs before the
+            distance; KS and batch distances take ``"identity"`` or ``"sort"``.
         time_limit_s: wall-time limit of one simulation, s; longer runs count as failed.
 
     Returns:
-        A :class:`SimulatorNode` describing the node and the variables it created.
+        A :class:`SimulatorNode` describing the node and the variables it created or used.
     """
     model = pm.modelcontext(None)
     if not np.isfinite(epsilon) or epsilon <= 0:
         raise ValueError(f"epsilon must be a positive number, got {epsilon}")
     info = check_simulator(simulator)
+    if isinstance(parameters, str):
+        raise TypeError(f"parameters must be a sequence of names, got the string {parameters!r}")
     data = prepare_observed(observed, outputs, info.output_names)
+    _check_outputs_produced(simulator, data)
+    kernel, sum_stat = _distance_op(distance, sum_stat, data)
 
-    if prior is None:
-        prior = UniformPrior(simulator_bounds(simulator, parameters))
-    elif not isinstance(prior, Prior):
-        prior = UniformPrior(prior)
+    given, prior = _prior_parts(prior, simulator, parameters, model)
     if noise is not None and not isinstance(noise, Mapping):
         noise = dict.fromkeys(data.names, noise)
-    prior = with_noise(prior, noise, data.names)
-    check_prior_support(info.support, prior.bounds)
+    prior = _with_noise_bounds(prior, noise, data.names)
+    if prior is not None:
+        check_prior_support(info.support, prior.bounds)
+    names = [*given, *(prior.names if prior is not None else ())]
 
-    noise_outputs = tuple(out for out in data.names if noise_parameter(out) in prior.names)
+    noise_outputs = tuple(out for out in data.names if noise_parameter(out) in names)
     stray_noise = [
-        n
-        for n in prior.names
-        if n.startswith(NOISE_PREFIX) and n[len(NOISE_PREFIX) :] not in data.names
+        n for n in names if n.startswith(NOISE_PREFIX) and n[len(NOISE_PREFIX) :] not in data.names
     ]
     if stray_noise:
         raise ValueError(
             f"prior names noise scales {stray_noise} of outputs not compared; outputs: "
             f"{list(data.names)}"
         )
-    model_parameters = tuple(n for n in prior.names if not n.startswith(NOISE_PREFIX))
+    model_parameters = tuple(n for n in names if not n.startswith(NOISE_PREFIX))
     if parameters is not None and set(parameters) != set(model_parameters):
         raise ValueError(
             f"parameters {list(parameters)} differ from the prior's parameters "
@@ -377,8 +570,17 @@ def add_simulator(
             raise ValueError(f"unknown parameter(s) {unknown}; the simulator has {list(known)}")
     if not model_parameters:
         raise ValueError("the prior holds no simulator parameter to calibrate")
+    bounds = _known_bounds(simulator)
+    for parameter, variable in given.items():
+        limits = (0.0, np.inf) if parameter.startswith(NOISE_PREFIX) else bounds.get(parameter)
+        _check_within_bounds(parameter, variable, limits)
+        if variable.name not in model.named_vars:  # an expression such as theta[0]: name it
+            given[parameter] = pm.Deterministic(parameter, variable)
 
-    variables = prior_variables(prior, joint_name=f"{name}_theta")
+    variables = {
+        **given,
+        **(prior_variables(prior, joint_name=f"{name}_theta") if prior is not None else {}),
+    }
     function = SimulatorFunction(
         simulator, model_parameters, data, noise_outputs, time_limit_s=time_limit_s
     )
@@ -393,17 +595,22 @@ def add_simulator(
         name,
         function,
         *params,
-        distance=DistanceKernel(distance),
-        sum_stat="identity",
+        distance=kernel,
+        sum_stat=sum_stat,
         epsilon=float(epsilon),
         signature="(p)->()" if len(params) == 1 else "(p),(q)->()",
         observed=data.values,
         dims=(f"{name}_output", f"{name}_time"),
     )
-    return SimulatorNode(variable, prior, model_parameters, noise_outputs, data, function)
+    return SimulatorNode(
+        variable, prior, model_parameters, noise_outputs, data, function, variables
+    )
 
 
 __all__ = [
+    "DISTANCES",
+    "PRIOR_CHECK_DRAWS",
+    "SUM_STATS",
     "DistanceKernel",
     "SimulatorFunction",
     "SimulatorNode",

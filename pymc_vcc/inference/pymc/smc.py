@@ -20,7 +20,8 @@ random stream, the same seed gives the same posterior as the stock kernel, bit f
 
 Simulations run and failed per stage are recorded in ``sample_stats`` (``simulations``,
 ``failed_simulations``, ``resumed_simulations``, ``stage_seconds``) and their totals in its
-attributes.
+attributes; :func:`sample_smc_abc` returns them over ``(chain, stage)``, totals over all chains,
+and the observed data as one variable per output (see :mod:`pymc_vcc.inference.pymc.layout`).
 
 Checkpoints (``sample_smc_abc(checkpoint=path)``): with a fixed seed, a run proposes the same
 particles in the same order, each simulation with the same random stream; so a run started again
@@ -76,6 +77,7 @@ from pymc_vcc.execution.executors import (
 )
 from pymc_vcc.execution.outcomes import OK, SimulationOutcome, crash_outcome
 from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore
+from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import SimulatorFunction
 
 logger = logging.getLogger(__name__)
@@ -261,15 +263,19 @@ class ParallelIMH(IMH):
         self._reset_counters()
 
     def _reset_counters(self) -> None:
-        self._stage_simulations = 0
-        self._stage_failures = 0
-        self._stage_resumed = 0
-        self._stage_start = time.perf_counter()
+        """Zero the counts of a stage and the totals (over every chain this kernel runs)."""
+        self._reset_stage_counters()
         self.total_simulations = 0
         self.total_failures = 0
         self.total_resumed = 0
         self.failure_kinds: Counter[str] = Counter()
         self.failure_reasons: list[str] = []
+
+    def _reset_stage_counters(self) -> None:
+        self._stage_simulations = 0
+        self._stage_failures = 0
+        self._stage_resumed = 0
+        self._stage_start = time.perf_counter()
 
     def __getstate__(self) -> dict:
         if self.checkpoint is not None:
@@ -294,7 +300,7 @@ class ParallelIMH(IMH):
         # Simulation streams are children of the chain's seed: they neither consume nor shift
         # the chain generator that drives proposals and resampling.
         self._seeds = rng.bit_generator.seed_seq.spawn(1)[0]
-        self._reset_counters()
+        self._reset_stage_counters()
         self._finished = self.checkpoint.load() if self.checkpoint is not None else {}
         super().initialize(start, rng)
 
@@ -516,8 +522,10 @@ def sample_smc_abc(
         **kwargs: other ``pm.sample_smc`` arguments (``start``, ``idata_kwargs``, ...).
 
     Returns:
-        The DataTree of ``pm.sample_smc`` (``posterior``, ``sample_stats`` with the
-        simulation counts, ``observed_data``).
+        The DataTree of ``pm.sample_smc`` in the layout of
+        :func:`~pymc_vcc.inference.pymc.layout.standard_layout`: ``posterior``,
+        ``sample_stats`` over ``(chain, stage)`` with the simulation totals of all chains in its
+        attrs, ``observed_data`` with one variable per output.
     """
     if int(chains) != chains or chains < 1:
         raise ValueError(f"chains must be a positive integer, got {chains}")
@@ -543,7 +551,7 @@ def sample_smc_abc(
         with executor_scope(executor, n_workers) as opened, warnings.catch_warnings():
             # The distance kernel is a Python Op by design: the simulations run outside PyTensor.
             warnings.filterwarnings("ignore", "Numba will use object mode", UserWarning)
-            return pm.sample_smc(
+            tree = pm.sample_smc(
                 draws=int(draws),
                 kernel=ParallelIMH,
                 chains=int(chains),
@@ -557,6 +565,7 @@ def sample_smc_abc(
                 correlation_threshold=correlation_threshold,
                 **kwargs,
             )
+        return standard_layout(tree, model)
     finally:
         if store is not None:
             store.close()
