@@ -44,12 +44,26 @@ def _leak(args: argparse.Namespace) -> int:
         references_kg=args.references,
         sampler=args.sampler,
         alarm_fraction=args.alarm_fraction,
+        sensor_noise=_sensor_noise(args),
+        inputs=_inputs(args),
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations, "
         f"{result.wall_seconds:.0f} s, sampler {result.sampler}"
     )
     return _report(args, text, result.summary(), result.files)
+
+
+def _sensor_noise(args: argparse.Namespace):
+    from pymc_vcc.inference.noise import SensorNoise
+
+    return SensorNoise.typical() if args.sensor_noise == "typical" else None
+
+
+def _inputs(args: argparse.Namespace):
+    from pymc_vcc.physics.inputs import load_inputs_csv
+
+    return load_inputs_csv(args.inputs) if args.inputs else None
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -62,7 +76,7 @@ def _demo(args: argparse.Namespace) -> int:
 def _estimate(args: argparse.Namespace) -> int:
     from pymc_vcc.studies import estimation_study
 
-    result = estimation_study(_settings(args))
+    result = estimation_study(_settings(args), sensor_noise=_sensor_noise(args))
     summary = result.summary()
     lines = [
         f"{'parameter':10s} {'truth 1':>10s} {'mean 1':>10s} {'sd ratio 1':>10s} "
@@ -138,8 +152,32 @@ def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -
     parser.add_argument("--json", action="store_true", help="print one JSON object last")
 
 
+def _add_sensor_noise_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--sensor-noise",
+        choices=["none", "typical"],
+        default="none",
+        help="noise on the reference data, accounted for by the sampler: none (the paper) or "
+        "typical (0.3 K, 0.5 %% of pressure, 1 %% of mass flow)",
+    )
+
+
 def _add_leak_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--sampler", choices=["rejection", "smc"], default="rejection")
+    parser.add_argument(
+        "--method",
+        "--sampler",
+        dest="sampler",
+        choices=["rejection", "smc", "likelihood"],
+        default="rejection",
+        help="rejection (the paper's ABC), smc (SMC-ABC) or likelihood (exact likelihood under "
+        "--sensor-noise, tempered SMC)",
+    )
+    _add_sensor_noise_option(parser)
+    parser.add_argument(
+        "--inputs",
+        metavar="CSV",
+        help="input profile (columns as load_inputs_csv; default: the built-in step profile)",
+    )
     parser.add_argument(
         "--references",
         type=float,
@@ -177,6 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
         "estimate", help="sequential estimation of all 26 parameters on two datasets (Figs. 4-8)"
     )
     _add_study_options(estimate, "results/estimate", "small")
+    _add_sensor_noise_option(estimate)
     estimate.set_defaults(handler=_estimate)
 
     leak = commands.add_parser("leak", help="refrigerant-leak identification (Table II)")

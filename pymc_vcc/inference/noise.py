@@ -18,10 +18,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import xarray as xr
 from scipy.signal import lfilter
 
 from pymc_vcc.inference.priors import Prior, UniformPrior
-from pymc_vcc.inference.series import ObservedData
+from pymc_vcc.inference.series import ObservedData, prepare_observed
 
 NOISE_PREFIX = "nu_"
 
@@ -217,6 +218,15 @@ class SensorNoise:
             correlation=float(self.correlation),
             dof=None if self.dof is None else float(self.dof),
         )
+
+    def measure(self, outputs: xr.Dataset, rng: np.random.Generator) -> xr.Dataset:
+        """What the sensors read of noise-free ``outputs`` (variables with ``units``): a copy."""
+        data = prepare_observed(outputs)
+        noisy = self.resolve(data).sample(data.values, rng)
+        measured = outputs.copy()
+        for name, row in zip(data.names, noisy, strict=True):
+            measured[name] = measured[name].copy(data=row)
+        return measured
 
     def prior_bounds(self, observed: ObservedData) -> dict[str, tuple[float, float]]:
         """Bounds of the learnable scales ``sigma_<output>`` (empty unless ``learnable``)."""

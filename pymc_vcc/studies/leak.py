@@ -29,7 +29,6 @@ from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.rejection import abc_rejection
-from pymc_vcc.inference.series import prepare_observed
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_charge_posteriors, save_figure
@@ -113,13 +112,7 @@ def reference_data(
         )
     if sensor_noise is None:
         return result
-    observed = simulator.output_names
-    noise = sensor_noise.resolve(prepare_observed(result, observed))
-    values = np.stack([result[name].values for name in observed])
-    noisy = noise.sample(values, rng if rng is not None else np.random.default_rng())
-    for name, row in zip(observed, noisy, strict=True):
-        result[name].values = row
-    return result
+    return sensor_noise.measure(result, rng if rng is not None else np.random.default_rng())
 
 
 def _calibrate(

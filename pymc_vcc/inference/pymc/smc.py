@@ -581,20 +581,29 @@ MAX_DISTANCE_RATIO = 3.0
 """Median final distance over ε above which the ABC kernel is too narrow for the simulator."""
 
 
+def _per_chain(values: np.ndarray, chains: int) -> list[np.ndarray]:
+    """A per-stage stat of ``pm.sample_smc`` as one array per chain (one chain comes as a flat
+    array over stages, several as an object array of ragged lists)."""
+    if chains == 1:
+        return [np.asarray(values, dtype=float).ravel()]
+    return [np.asarray(list(row), dtype=float) for row in values]
+
+
 def _with_run_summary(tree: DataTree, model: Model) -> DataTree:
     """Record ε, stages and simulations over all chains in ``sample_stats``; warn on the
     signs of an untrustworthy posterior (stage ESS below :data:`MIN_ESS`, final distances far
     above ε)."""
     stats = tree["sample_stats"].to_dataset()
-    per_chain = [np.asarray(list(row), dtype=float) for row in stats["simulations"].values]
-    resumed = [np.asarray(list(row), dtype=float) for row in stats["resumed_simulations"].values]
-    ess = np.concatenate([np.asarray(list(row), dtype=float) for row in stats["ess"].values])
+    chains = tree["posterior"].sizes["chain"]
+    per_chain = _per_chain(stats["simulations"].values, chains)
+    resumed = _per_chain(stats["resumed_simulations"].values, chains)
+    ess = np.concatenate(_per_chain(stats["ess"].values, chains))
     nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
     epsilon = [float(getattr(rv.owner.op.epsilon, "data", rv.owner.op.epsilon)) for rv in nodes]
     total = int(sum(row.sum() for row in per_chain) + sum(row.sum() for row in resumed))
     summary = {
         "n_simulations": ((), total),
-        "n_stages": ("chain", [row.size for row in per_chain]),
+        "n_stages": ("smc_chain", [row.size for row in per_chain]),
         "epsilon": ("simulator_node", epsilon),
         "min_stage_ess": ((), float(ess.min()) if ess.size else np.nan),
     }
