@@ -98,6 +98,19 @@ def _estimate(args: argparse.Namespace) -> int:
     return _report(args, text, summary, result.files)
 
 
+def _validate(args: argparse.Namespace) -> int:
+    from pymc_vcc.studies.validation import validation_study
+
+    result = validation_study(
+        _settings(args),
+        reference_kg=args.reference,
+        n_datasets=args.datasets,
+        methods=args.methods,
+    )
+    text = f"{result.format_table()}\n\n{result.wall_seconds:.0f} s"
+    return _report(args, text, result.summary(), result.files)
+
+
 def _sobol(args: argparse.Namespace) -> int:
     from pymc_vcc.studies import sobol_study
 
@@ -194,6 +207,19 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_validate_options(parser: argparse.ArgumentParser) -> None:
+    from pymc_vcc.studies.validation import METHODS
+
+    parser.add_argument("--reference", type=float, default=1.5, metavar="KG", help="true charge")
+    parser.add_argument("--datasets", type=int, default=20, help="noise seeds (default 20)")
+    parser.add_argument(
+        "--methods",
+        nargs="+",
+        choices=list(METHODS),
+        default=["ks", "ks-noise", "windowed", "likelihood"],
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pymc-vcc``, one sub-command per job."""
     parser = argparse.ArgumentParser(
@@ -222,6 +248,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_study_options(leak, "results/leak", "small")
     _add_leak_options(leak)
     leak.set_defaults(handler=_leak)
+
+    validate = commands.add_parser(
+        "validate",
+        help="charge identification on noisy data: methods side by side over noise seeds, with "
+        "the coverage of their 95 %% intervals",
+    )
+    _add_study_options(validate, "results/validate", "small")
+    _add_validate_options(validate)
+    validate.set_defaults(handler=_validate)
 
     sobol = commands.add_parser("sobol", help="Sobol sensitivity (Figs. 9 and 10)")
     _add_study_options(sobol, "results/sobol", "small")

@@ -390,7 +390,8 @@ class Recording:
 class SensorProblem:
     """A cheap deterministic one-parameter "cycle" with VCC-like outputs and units.
 
-    Outputs on a 1 s grid, linear in the charge M0 (kg) around a periodic load: a discharge
+    Outputs on a 1 s grid (an array; :meth:`dataset` gives them with units), linear in the
+    charge M0 (kg) around a periodic load: a discharge
     temperature ``TD`` (K), a discharge pressure ``PD`` (Pa) and a mass flow ``MDOT`` (kg/s), so
     that :class:`~pymc_vcc.inference.noise.SensorNoise` applies as on the VCC model (absolute
     noise on temperatures, relative on the others). With absolute noise only (``TD``, or
@@ -430,24 +431,33 @@ class SensorProblem:
         intercept, slope = self._design()
         return intercept + slope * (float(charge) - 1.5)
 
-    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> xr.Dataset:
-        dataset = as_dataset(self.outputs(theta["M0"]), self.output_names)
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> np.ndarray:
+        return self.outputs(theta["M0"])
+
+    def dataset(self, charge: float) -> xr.Dataset:
+        """Noise-free outputs at charge M0 as a Dataset whose variables carry their units."""
+        dataset = as_dataset(self.outputs(charge), self.output_names)
         for name, units in zip(self.output_names, self.units, strict=True):
             dataset[name].attrs["units"] = units
         return dataset
 
     def exact_posterior(
-        self, observed: np.ndarray, scales: np.ndarray, correlation: float = 0.0
+        self,
+        observed: xr.Dataset,
+        scales: Mapping[str, float],
+        correlation: float = 0.0,
     ) -> tuple[float, float]:
         """Posterior mean and sd of M0 (flat prior) under absolute Gaussian AR(1) noise.
 
         Args:
-            observed: observed outputs (3, n_time).
-            scales: absolute noise sd of each output, in its units (3,).
+            observed: observed outputs, the variables named in ``scales``.
+            scales: output -> absolute noise sd, in the output's units.
             correlation: lag-1 autocorrelation of the errors.
         """
-        intercept, slope = self._design()
-        sd = np.asarray(scales, dtype=float)[:, None]
+        rows = [self.output_names.index(name) for name in scales]
+        intercept, slope = (part[rows] for part in self._design())
+        observed = np.stack([observed[name].values for name in scales])
+        sd = np.array(list(scales.values()), dtype=float)[:, None]
         residual, design = (observed - intercept) / sd, slope / sd
 
         def whiten(rows: np.ndarray) -> np.ndarray:

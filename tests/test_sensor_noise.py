@@ -15,7 +15,7 @@ PROBLEM = SensorProblem()
 
 
 def observed_at(charge: float = 1.5):
-    return prepare_observed(PROBLEM({"M0": charge}, np.random.default_rng(0)))
+    return prepare_observed(PROBLEM.dataset(charge))
 
 
 def test_kinds_follow_units_with_per_output_overrides():
@@ -79,7 +79,7 @@ def test_student_t_likelihood_and_failed_simulations():
 
 def test_rejection_with_sensor_noise_learns_scales_by_name():
     truth = 1.7
-    data = PROBLEM({"M0": truth}, None)
+    data = PROBLEM.dataset(truth)
     noise = SensorNoise(learnable=True, prior_factor=2.0)
     clean = prepare_observed(data)
     noisy = noise.resolve(clean).sample(clean.values, np.random.default_rng(3))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+from scipy.optimize import least_squares
 from scipy.special import expit, logit, logsumexp
 
 Bounds = Mapping[str, tuple[float, float]]
@@ -26,6 +27,39 @@ _EDGE = 1e-9  # fraction of the range kept between a sample and its bound in log
 _SAMPLES_PER_FREE_PARAMETER = 10  # samples a mixture needs per free parameter it fits
 _COVARIANCE_FLOOR = 1e-3  # added to covariance diagonals, in units of the logit variance
 _MOMENT_DRAWS = 20000  # draws checking a fitted mixture's marginal moments
+
+
+def _with_marginal_moments(
+    prior: GMMPrior, samples: np.ndarray, rng: np.random.Generator
+) -> GMMPrior:
+    """``prior`` mapped per parameter by an affine map of its logit, u → a + b (u − c), so that
+    its marginal means and sds in physical units equal the samples' (within Monte Carlo error).
+
+    An affine map of one logit coordinate changes only that marginal, and keeps a Gaussian
+    mixture a Gaussian mixture.
+    """
+    width = prior.upper - prior.lower
+    draws = logit(
+        np.clip((prior.sample(_MOMENT_DRAWS, rng) - prior.lower) / width, _EDGE, 1 - _EDGE)
+    )
+    centre = draws.mean(axis=0)
+    shift, stretch = centre.copy(), np.ones(prior.ndim)
+    for i in range(prior.ndim):
+        mean, sd = samples[:, i].mean(), samples[:, i].std(ddof=1)
+        if sd <= 0:
+            continue
+
+        def gaps(x: np.ndarray, i: int = i, mean: float = mean, sd: float = sd) -> np.ndarray:
+            values = prior.lower[i] + width[i] * expit(
+                x[0] + np.exp(x[1]) * (draws[:, i] - centre[i])
+            )
+            return np.array([values.mean() - mean, values.std() - sd]) / sd
+
+        solution = least_squares(gaps, [centre[i], 0.0]).x
+        shift[i], stretch[i] = solution[0], np.exp(solution[1])
+    means = shift + stretch * (prior.means - centre)
+    covariances = prior.covariances * np.outer(stretch, stretch)
+    return GMMPrior(prior.bounds, prior.weights, means, covariances)
 
 
 def _moment_gap(prior: Prior, samples: np.ndarray, rng: np.random.Generator) -> float:
@@ -262,7 +296,8 @@ class GMMPrior(Prior):
         not a 1e-6-wide spike). Covariances are floored at 1e-3 of each parameter's logit
         variance. Among the fits, in order of BIC, the first whose marginal means and standard
         deviations (physical units, from 20000 draws) are within ``moment_tolerance`` sample
-        standard deviations of the samples' is chosen; if none is, the closest.
+        standard deviations of the samples' is chosen; if none is, the best by BIC with each
+        logit coordinate mapped affinely so that the marginal means and sds match.
 
         Args:
             samples: an array (n, d) in the order of ``bounds``, a mapping name -> values, a
@@ -328,8 +363,9 @@ class GMMPrior(Prior):
         check = np.random.default_rng(seed)
         gaps = [_moment_gap(prior, matrix, check) for _, prior in fitted]
         faithful = [i for i, gap in enumerate(gaps) if gap <= moment_tolerance]
-        chosen = faithful[0] if faithful else int(np.argmin(gaps))
-        return fitted[chosen][1]
+        if faithful:
+            return fitted[faithful[0]][1]
+        return _with_marginal_moments(fitted[0][1], matrix, check)
 
     def _log_unbounded_density(self, unbounded: np.ndarray) -> np.ndarray:
         terms = np.empty((unbounded.shape[0], self.n_components))

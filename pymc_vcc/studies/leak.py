@@ -115,7 +115,7 @@ def reference_data(
     return sensor_noise.measure(result, rng if rng is not None else np.random.default_rng())
 
 
-def _calibrate(
+def calibrate_charge(
     sampler: str,
     simulator: VCCSimulator,
     prior: UniformPrior,
@@ -123,18 +123,23 @@ def _calibrate(
     settings: StudySettings,
     executor,
     seed: np.random.SeedSequence,
-    stage: int,
+    checkpoint_name: str,
     epsilon: float,
     sensor_noise: SensorNoise | None,
     distance: BatchDistance,
 ) -> tuple[xr.DataTree, int]:
+    """The posterior of the charge on one dataset, and the simulations it took.
+
+    ``sensor_noise`` is the noise the sampler accounts for (None: none, as the paper);
+    ``checkpoint_name`` names its checkpoint under ``settings.out``.
+    """
     if sampler == "rejection":
         tree = abc_rejection(
             simulator,
             prior,
             observed,
             executor=executor,
-            checkpoint=settings.checkpoint(f"leak_{stage}"),
+            checkpoint=settings.checkpoint(checkpoint_name),
             seed=seed,
             sensor_noise=sensor_noise,
             distance=distance,
@@ -158,7 +163,7 @@ def _calibrate(
             settings.work.smc_draws,
             executor=executor,
             random_seed=int(seed.generate_state(1)[0]),
-            checkpoint=settings.checkpoint(f"leak_{sampler}_{stage}"),
+            checkpoint=settings.checkpoint(checkpoint_name),
             progressbar=bool(settings.progress),
         )
     stats = tree["sample_stats"]
@@ -223,7 +228,7 @@ def leak_study(
         for stage, (reference, seed) in enumerate(zip(references_kg, seeds, strict=True)):
             noise_rng = np.random.default_rng(seed.spawn(1)[0])
             observed = reference_data(simulator, reference, sensor_noise, noise_rng)
-            tree, ran = _calibrate(
+            tree, ran = calibrate_charge(
                 sampler,
                 simulator,
                 prior,
@@ -231,7 +236,7 @@ def leak_study(
                 settings,
                 executor,
                 seed,
-                stage,
+                f"leak_{stage}" if sampler == "rejection" else f"leak_{sampler}_{stage}",
                 smc_epsilon,
                 sensor_noise,
                 distance,
