@@ -1,12 +1,15 @@
 """Sensor noise in engineering units, and the exact likelihood under it."""
 
 import numpy as np
+import pymc as pm
 import pytest
 from scipy import stats
 
 from pymc_vcc.inference.likelihood import log_likelihood
 from pymc_vcc.inference.noise import OutputNoise, SensorNoise, sensor_parameter
 from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.inference.series import prepare_observed
 from pymc_vcc.testing import SensorProblem
@@ -103,3 +106,26 @@ def test_rejection_with_sensor_noise_learns_scales_by_name():
     low, high = posterior[sensor_parameter("TD")].values.min(), posterior["sigma_TD"].max()
     assert low >= 0.15 and high <= 0.6  # Uniform(0.3 / 2, 0.3 · 2)
     assert abs(float(posterior["M0"].mean()) - truth) < 0.1
+
+
+def test_smc_warns_when_noise_free_simulations_cannot_reach_noisy_data(quiet_pymc):
+    data = SensorNoise().measure(PROBLEM.dataset(1.5), np.random.default_rng(5))
+    with pm.Model():
+        add_simulator("y", PROBLEM, data, epsilon=0.002)
+        with pytest.warns(RuntimeWarning, match="distances sit about"):
+            tree = sample_smc_abc(40, executor="serial", random_seed=1, progressbar=False)
+    stats = tree["sample_stats"]
+    assert stats["epsilon"].values.tolist() == [0.002]
+    assert int(stats["n_simulations"]) == int(stats["simulations"].sum())
+    assert int(stats["n_stages"].sum()) == stats["simulations"].size
+
+
+def test_smc_warns_on_tiny_populations(quiet_pymc):
+    data = SensorNoise().measure(PROBLEM.dataset(1.5), np.random.default_rng(6))
+    with pm.Model():
+        add_simulator("y", PROBLEM, data, epsilon=0.1, sensor_noise=SensorNoise(learnable=True))
+        with (
+            pytest.warns(RuntimeWarning, match="draws=3 particles for 4 parameters"),
+            pytest.warns(RuntimeWarning, match="effective sample size fell"),
+        ):
+            sample_smc_abc(3, executor="serial", random_seed=1, progressbar=False)

@@ -617,7 +617,7 @@ def _with_run_summary(tree: DataTree, model: Model) -> DataTree:
             RuntimeWarning,
             stacklevel=3,
         )
-    if nodes and all(isinstance(rv.owner.op.distance, DistanceKernel) for rv in nodes):
+    if nodes and all(isinstance(rv.owner.op._distance, DistanceKernel) for rv in nodes):
         median = np.median(np.asarray(stats.attrs.get("median_log_likelihood", np.nan)))
         ratio = float(np.sqrt(max(-2.0 * median, 0.0)))
         if ratio > MAX_DISTANCE_RATIO:
