@@ -21,3 +21,14 @@ def test_unknown_benchmark_is_a_clear_error():
 def test_parser_requires_a_command():
     with pytest.raises(SystemExit):
         build_parser().parse_args([])
+
+
+def test_noisy_data_options_parse():
+    args = build_parser().parse_args(
+        ["leak", "--method", "likelihood", "--sensor-noise", "typical", "--references", "1.2"]
+    )
+    assert (args.sampler, args.sensor_noise, args.references) == ("likelihood", "typical", [1.2])
+    assert build_parser().parse_args(["leak", "--sampler", "smc"]).sampler == "smc"
+    assert build_parser().parse_args(["estimate", "--sensor-noise", "typical"]).sensor_noise
+    validate = build_parser().parse_args(["validate", "--datasets", "3", "--methods", "ks"])
+    assert (validate.datasets, validate.methods, validate.reference) == (3, ["ks"], 1.5)
