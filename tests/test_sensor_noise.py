@@ -11,6 +11,7 @@ from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.rejection import abc_rejection
+from pymc_vcc.inference.sequential import sequential_calibration
 from pymc_vcc.inference.series import prepare_observed
 from pymc_vcc.testing import SensorProblem
 
@@ -129,3 +130,25 @@ def test_smc_warns_on_tiny_populations(quiet_pymc):
             pytest.warns(RuntimeWarning, match="effective sample size fell"),
         ):
             sample_smc_abc(3, executor="serial", random_seed=1, progressbar=False)
+
+
+def test_sequential_calibration_carries_learnable_sensor_scales_into_the_gmm():
+    noise = SensorNoise(learnable=True)
+    rng = np.random.default_rng(8)
+    datasets = [noise.measure(PROBLEM.dataset(1.6), rng) for _ in range(2)]
+    result = sequential_calibration(
+        PROBLEM,
+        UniformPrior(PROBLEM.bounds),
+        datasets,
+        sensor_noise=noise,
+        n_pilot=100,
+        quantile=0.2,
+        n_main=200,
+        n_desired=30,
+        executor="serial",
+        seed=9,
+        progress=False,
+    )
+    names = {"M0", "sigma_TD", "sigma_PD", "sigma_MDOT"}
+    assert set(result.priors[1].names) == names
+    assert set(result.trees[1]["posterior"].data_vars) == names
