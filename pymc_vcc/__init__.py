@@ -29,7 +29,15 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.physics.simulate": ("VCCSimulator", "operating_point"),
     "pymc_vcc.inference.simulator": ("Simulator", "check_simulator"),
     "pymc_vcc.io.measurements": ("load_measurements", "Measurements", "example_log_path"),
-    "pymc_vcc.inference.distances": ("ks_distance", "ks_distances"),
+    "pymc_vcc.inference.distances": (
+        "ks_distance",
+        "ks_distances",
+        "wasserstein_distances",
+        "windowed_distances",
+    ),
+    "pymc_vcc.inference.noise": ("SensorNoise",),
+    "pymc_vcc.inference.likelihood": ("log_likelihood",),
+    "pymc_vcc.inference.pymc.likelihood": ("add_likelihood",),
     "pymc_vcc.inference.priors": ("Prior", "UniformPrior", "GMMPrior", "load_prior"),
     "pymc_vcc.inference.rejection": ("abc_rejection", "TooManyFailuresError"),
     "pymc_vcc.inference.sequential": ("sequential_calibration", "SequentialResult"),
@@ -39,7 +47,13 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.inference.pymc.smc": ("sample_smc_abc", "ParallelIMH"),
     "pymc_vcc.inference.predictive": ("simulate_predictive", "predictive_bands"),
     "pymc_vcc.inference.sensitivity": ("sobol_indices",),
-    "pymc_vcc.studies": ("StudySettings", "leak_study", "estimation_study", "sobol_study"),
+    "pymc_vcc.studies": (
+        "StudySettings",
+        "leak_study",
+        "estimation_study",
+        "sobol_study",
+        "validation_study",
+    ),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 

@@ -58,17 +58,34 @@ def _report(args: argparse.Namespace, text: str, summary: dict) -> int:
 def _leak(args: argparse.Namespace) -> int:
     from pymc_vcc.studies import leak_study
 
+    inputs = _inputs(args)
+    window = {} if inputs is None else {"t_calibration": min(1060.0, float(inputs["time"][-1]))}
     result = leak_study(
         _settings(args),
         references_kg=args.references,
         sampler=args.sampler,
         alarm_fraction=args.alarm_fraction,
+        sensor_noise=_sensor_noise(args),
+        inputs=inputs,
+        **window,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations, "
         f"{result.wall_seconds:.0f} s, sampler {result.sampler}"
     )
     return _report(args, text, result.summary())
+
+
+def _sensor_noise(args: argparse.Namespace):
+    from pymc_vcc.inference.noise import SensorNoise
+
+    return SensorNoise.typical() if args.sensor_noise == "typical" else None
+
+
+def _inputs(args: argparse.Namespace):
+    from pymc_vcc.physics.inputs import load_inputs_csv
+
+    return load_inputs_csv(args.inputs) if args.inputs else None
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -84,7 +101,11 @@ def _estimate(args: argparse.Namespace) -> int:
     from pymc_vcc.studies import estimation_study
 
     result = estimation_study(
-        _settings(args), method=args.method, smc_epsilon=args.epsilon, smc_draws=args.particles
+        _settings(args),
+        method=args.method,
+        smc_epsilon=args.epsilon,
+        smc_draws=args.particles,
+        sensor_noise=_sensor_noise(args),
     )
     summary = result.summary()
     lines = [
@@ -105,6 +126,19 @@ def _estimate(args: argparse.Namespace) -> int:
         "(sd ratio: posterior sd / sd of the uniform Table III prior)"
     )
     return _report(args, text, summary)
+
+
+def _validate(args: argparse.Namespace) -> int:
+    from pymc_vcc.studies.validation import validation_study
+
+    result = validation_study(
+        _settings(args),
+        reference_kg=args.reference,
+        n_datasets=args.datasets,
+        methods=args.methods,
+    )
+    text = f"{result.format_table()}\n\n{result.wall_seconds:.0f} s"
+    return _report(args, text, result.summary(), result.files)
 
 
 def _sobol(args: argparse.Namespace) -> int:
@@ -212,12 +246,32 @@ def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -
     )
 
 
+def _add_sensor_noise_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--sensor-noise",
+        choices=["none", "typical"],
+        default="none",
+        help="noise on the reference data, accounted for by the sampler: none (the paper) or "
+        "typical (0.3 K, 0.5 %% of pressure, 1 %% of mass flow)",
+    )
+
+
 def _add_leak_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
+        "--method",
         "--sampler",
-        choices=["rejection", "smc"],
+        dest="sampler",
+        choices=["rejection", "smc", "likelihood"],
         default="rejection",
-        help="ABC rejection (the paper's Algorithm 1) or PyMC's SMC-ABC (default: rejection)",
+        help="rejection (the paper's ABC), smc (SMC-ABC) or likelihood (exact likelihood under "
+        "--sensor-noise, tempered SMC)",
+    )
+    _add_sensor_noise_option(parser)
+    parser.add_argument(
+        "--inputs",
+        metavar="CSV",
+        help="input profile (columns as load_inputs_csv; default: the built-in step profile); "
+        "calibrated over its first 1060 s, or all of it if shorter",
     )
     parser.add_argument(
         "--references",
@@ -232,6 +286,19 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=0.9,
         help="leak alarm: P(M0 < fraction × first reference charge) (default 0.9)",
+    )
+
+
+def _add_validate_options(parser: argparse.ArgumentParser) -> None:
+    from pymc_vcc.studies.validation import METHODS
+
+    parser.add_argument("--reference", type=float, default=1.5, metavar="KG", help="true charge")
+    parser.add_argument("--datasets", type=int, default=20, help="noise seeds (default 20)")
+    parser.add_argument(
+        "--methods",
+        nargs="+",
+        choices=list(METHODS),
+        default=["ks", "ks-noise", "windowed", "likelihood"],
     )
 
 
@@ -257,6 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
         "estimate", help="sequential estimation of all 26 parameters on two datasets (Figs. 4-8)"
     )
     _add_study_options(estimate, "results/estimate", "small")
+    _add_sensor_noise_option(estimate)
     estimate.add_argument(
         "--method",
         choices=["rejection", "smc"],
@@ -278,6 +346,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_study_options(leak, "results/leak", "small")
     _add_leak_options(leak)
     leak.set_defaults(handler=_leak)
+
+    validate = commands.add_parser(
+        "validate",
+        help="charge identification on noisy data: methods side by side over noise seeds, with "
+        "the coverage of their 95 %% intervals",
+    )
+    _add_study_options(validate, "results/validate", "small")
+    _add_validate_options(validate)
+    validate.set_defaults(handler=_validate)
 
     sobol = commands.add_parser("sobol", help="Sobol sensitivity (Figs. 9 and 10)")
     _add_study_options(sobol, "results/sobol", "small")

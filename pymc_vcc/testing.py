@@ -385,3 +385,87 @@ class Recording:
         finally:
             os.close(descriptor)
         return outputs
+
+
+@dataclass(frozen=True)
+class SensorProblem:
+    """A cheap deterministic one-parameter "cycle" with VCC-like outputs and units.
+
+    Outputs on a 1 s grid (an array; :meth:`dataset` gives them with units), linear in the
+    charge M0 (kg) around a periodic load: a discharge
+    temperature ``TD`` (K), a discharge pressure ``PD`` (Pa) and a mass flow ``MDOT`` (kg/s), so
+    that :class:`~pymc_vcc.inference.noise.SensorNoise` applies as on the VCC model (absolute
+    noise on temperatures, relative on the others). With absolute noise only (``TD``, or
+    every output given ``kinds`` of temperature), the posterior under a Gaussian (or AR(1))
+    likelihood is Gaussian with the moments of :meth:`exact_posterior` (bounds far away).
+
+    Attributes:
+        n_time: samples on the 1 s grid.
+        period: period of the load wave, s.
+    """
+
+    n_time: int = 120
+    period: float = 60.0
+
+    parameter_names: ClassVar[tuple[str, ...]] = ("M0",)
+    output_names: ClassVar[tuple[str, ...]] = ("TD", "PD", "MDOT")
+    units: ClassVar[tuple[str, ...]] = ("K", "Pa", "kg/s")
+    bounds: ClassVar[dict[str, tuple[float, float]]] = {"M0": (0.9, 2.2)}
+
+    def _design(self) -> tuple[np.ndarray, np.ndarray]:
+        """Intercepts and slopes (3, n_time): outputs = intercept + slope · (M0 − 1.5)."""
+        wave = np.sin(2 * np.pi * np.arange(self.n_time) / self.period)
+        intercept = np.stack(
+            [340.0 + 2.0 * wave, 2.7e6 * (1 + 0.01 * wave), 0.021 * (1 + 0.02 * wave)]
+        )
+        slope = np.stack(
+            [
+                np.full(self.n_time, 4.0),
+                np.full(self.n_time, 2.7e6 * 0.02),
+                0.021 * 0.01 * (1 + wave),
+            ]
+        )
+        return intercept, slope
+
+    def outputs(self, charge: float) -> np.ndarray:
+        """Noise-free outputs (3, n_time) at charge M0, SI units."""
+        intercept, slope = self._design()
+        return intercept + slope * (float(charge) - 1.5)
+
+    def __call__(self, theta: Mapping[str, float], rng: np.random.Generator) -> np.ndarray:
+        return self.outputs(theta["M0"])
+
+    def dataset(self, charge: float) -> xr.Dataset:
+        """Noise-free outputs at charge M0 as a Dataset whose variables carry their units."""
+        dataset = as_dataset(self.outputs(charge), self.output_names)
+        for name, units in zip(self.output_names, self.units, strict=True):
+            dataset[name].attrs["units"] = units
+        return dataset
+
+    def exact_posterior(
+        self,
+        observed: xr.Dataset,
+        scales: Mapping[str, float],
+        correlation: float = 0.0,
+    ) -> tuple[float, float]:
+        """Posterior mean and sd of M0 (flat prior) under absolute Gaussian AR(1) noise.
+
+        Args:
+            observed: observed outputs, the variables named in ``scales``.
+            scales: output -> absolute noise sd, in the output's units.
+            correlation: lag-1 autocorrelation of the errors.
+        """
+        rows = [self.output_names.index(name) for name in scales]
+        intercept, slope = (part[rows] for part in self._design())
+        observed = np.stack([observed[name].values for name in scales])
+        sd = np.array(list(scales.values()), dtype=float)[:, None]
+        residual, design = (observed - intercept) / sd, slope / sd
+
+        def whiten(rows: np.ndarray) -> np.ndarray:
+            out = rows.copy()
+            out[:, 1:] = (rows[:, 1:] - correlation * rows[:, :-1]) / np.sqrt(1 - correlation**2)
+            return out
+
+        residual, design = whiten(residual), whiten(design)
+        precision = float((design**2).sum())
+        return 1.5 + float((design * residual).sum()) / precision, precision**-0.5

@@ -85,3 +85,14 @@ def test_every_option_has_a_help_text():
     for name, command in commands.items():
         for action in command._actions:
             assert action.help, (name, action.option_strings)
+
+
+def test_noisy_data_options_parse():
+    args = build_parser().parse_args(
+        ["leak", "--method", "likelihood", "--sensor-noise", "typical", "--references", "1.2"]
+    )
+    assert (args.sampler, args.sensor_noise, args.references) == ("likelihood", "typical", [1.2])
+    assert build_parser().parse_args(["leak", "--sampler", "smc"]).sampler == "smc"
+    assert build_parser().parse_args(["estimate", "--sensor-noise", "typical"]).sensor_noise
+    validate = build_parser().parse_args(["validate", "--datasets", "3", "--methods", "ks"])
+    assert (validate.datasets, validate.methods, validate.reference) == (3, ["ks"], 1.5)

@@ -5,7 +5,13 @@ import pytest
 import xarray as xr
 from scipy import stats
 
-from pymc_vcc.inference.distances import ks_distance, ks_distances, ks_statistics
+from pymc_vcc.inference.distances import (
+    ks_distance,
+    ks_distances,
+    ks_statistics,
+    wasserstein_distances,
+    windowed_distances,
+)
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")  # scipy's p-value for tiny samples
@@ -78,3 +84,27 @@ def test_ks_distance_rejects_unknown_outputs_and_non_finite_values():
 def test_ks_statistics_rejects_mismatched_shapes():
     with pytest.raises(ValueError, match="expected sims"):
         ks_statistics(np.zeros((2, 3, 4)), np.zeros((2, 4)))
+
+
+def test_wasserstein_distance_is_scipys_over_the_observed_spread():
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(2, 50)) * [[1.0], [10.0]]
+    for m in (50, 37):
+        sims = rng.normal(0.3, 1.0, size=(3, 2, m)) * [[1.0], [10.0]]
+        expected = [
+            np.mean([stats.wasserstein_distance(sim[j], obs[j]) / obs[j].std() for j in range(2)])
+            for sim in sims
+        ]
+        np.testing.assert_allclose(wasserstein_distances(sims, obs), expected, rtol=1e-12)
+
+
+def test_windowed_distance_averages_out_noise_but_sees_a_shift():
+    rng = np.random.default_rng(1)
+    signal = np.sin(np.arange(600) / 40.0)[np.newaxis]
+    obs = signal + 0.05 * rng.standard_normal(signal.shape)
+    noisy_copy = signal + 0.05 * rng.standard_normal(signal.shape)
+    shifted = signal + 0.1
+    near, far = windowed_distances(np.stack([noisy_copy, shifted]), obs, window=10)
+    assert near < 0.05 < 0.1 < far
+    with pytest.raises(ValueError, match="observed grid"):
+        windowed_distances(np.stack([signal[:, :300]]), obs)

@@ -163,3 +163,32 @@ def test_prior_bounds_outside_the_units_are_refused_by_every_sampler():
     extrapolating = VCCSimulator(parameters=["M0"], outputs=["PD"], allow_outside_unit_bounds=True)
     check_prior_support(check_simulator(extrapolating).support, wide)  # asked for: allowed
     check_prior_support(check_simulator(simulator).support, {"M0": (1.0, 2.0)})
+
+
+def test_gmm_with_few_samples_falls_back_to_a_mixture_as_wide_as_the_samples():
+    rng = np.random.default_rng(5)
+    three = rng.uniform([0.2, 0.2], [0.8, 0.8], size=(3, 2))
+    prior = GMMPrior.fit(three, {"a": (0.0, 1.0), "b": (0.0, 1.0)}, seed=0)
+    assert prior.n_components == 1
+    draws = prior.sample(50_000, rng)
+    np.testing.assert_allclose(draws.std(axis=0), three.std(axis=0, ddof=1), rtol=0.1)
+    np.testing.assert_allclose(draws.mean(axis=0), three.mean(axis=0), atol=0.02)
+    bounds = {f"p{j}": (0.0, 1.0) for j in range(35)}
+    forty = rng.beta(4.0, 4.0, size=(40, 35))
+    wide = GMMPrior.fit(forty, bounds, seed=0)
+    assert wide.n_components == 1
+    assert np.linalg.matrix_rank(wide.covariances[0]) == 35
+    np.testing.assert_allclose(wide.sample(20_000, rng).std(axis=0), forty.std(axis=0), rtol=0.1)
+
+
+def test_gmm_transfer_keeps_marginal_means_and_sds_within_five_hundredths_of_an_sd():
+    """A skewed posterior against a bound, where one logit Gaussian shifts the moments."""
+    rng = np.random.default_rng(6)
+    samples = np.column_stack(
+        [np.clip(0.9 + 0.02 * rng.standard_normal(1000) ** 3, 0.6, 0.999), rng.beta(20, 2, 1000)]
+    )
+    prior = GMMPrior.fit(samples, {"a": (0.0, 1.0), "b": (0.0, 1.0)}, seed=1)
+    draws = prior.sample(200_000, np.random.default_rng(7))
+    sd = samples.std(axis=0, ddof=1)
+    assert np.all(np.abs(draws.mean(axis=0) - samples.mean(axis=0)) <= 0.05 * sd)
+    assert np.all(np.abs(draws.std(axis=0) - sd) <= 0.05 * sd)

@@ -18,11 +18,60 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+from scipy.optimize import least_squares
 from scipy.special import expit, logit, logsumexp
 
 Bounds = Mapping[str, tuple[float, float]]
 
 _EDGE = 1e-9  # fraction of the range kept between a sample and its bound in logit space
+_SAMPLES_PER_FREE_PARAMETER = 10  # samples a mixture needs per free parameter it fits
+_COVARIANCE_FLOOR = 1e-3  # added to covariance diagonals, in units of the logit variance
+_MOMENT_DRAWS = 20000  # draws checking a fitted mixture's marginal moments
+
+
+def _with_marginal_moments(
+    prior: GMMPrior, samples: np.ndarray, rng: np.random.Generator
+) -> GMMPrior:
+    """``prior`` mapped per parameter by an affine map of its logit, u → a + b (u − c), so that
+    its marginal means and sds in physical units equal the samples' (within Monte Carlo error).
+
+    An affine map of one logit coordinate changes only that marginal, and keeps a Gaussian
+    mixture a Gaussian mixture.
+    """
+    width = prior.upper - prior.lower
+    draws = logit(
+        np.clip((prior.sample(_MOMENT_DRAWS, rng) - prior.lower) / width, _EDGE, 1 - _EDGE)
+    )
+    centre = draws.mean(axis=0)
+    shift, stretch = centre.copy(), np.ones(prior.ndim)
+    for i in range(prior.ndim):
+        mean, sd = samples[:, i].mean(), samples[:, i].std(ddof=1)
+        if sd <= 0:
+            continue
+
+        def gaps(x: np.ndarray, i: int = i, mean: float = mean, sd: float = sd) -> np.ndarray:
+            values = prior.lower[i] + width[i] * expit(
+                x[0] + np.exp(x[1]) * (draws[:, i] - centre[i])
+            )
+            return np.array([values.mean() - mean, values.std() - sd]) / sd
+
+        solution = least_squares(gaps, [centre[i], 0.0]).x
+        shift[i], stretch[i] = solution[0], np.exp(solution[1])
+    means = shift + stretch * (prior.means - centre)
+    covariances = prior.covariances * np.outer(stretch, stretch)
+    return GMMPrior(prior.bounds, prior.weights, means, covariances)
+
+
+def _moment_gap(prior: Prior, samples: np.ndarray, rng: np.random.Generator) -> float:
+    """Largest gap of a marginal mean or sd between ``prior`` and ``samples``, in sample sds."""
+    draws = prior.sample(_MOMENT_DRAWS, rng)
+    sd = samples.std(axis=0, ddof=1)
+    varying = sd > 0
+    if not varying.any():
+        return 0.0
+    mean_gap = np.abs(draws.mean(axis=0) - samples.mean(axis=0))[varying] / sd[varying]
+    sd_gap = np.abs(draws.std(axis=0) - sd)[varying] / sd[varying]
+    return float(max(mean_gap.max(), sd_gap.max()))
 
 
 def validate_bounds(bounds: Bounds) -> dict[str, tuple[float, float]]:
@@ -258,8 +307,18 @@ class GMMPrior(Prior):
         *,
         max_components: int = 5,
         seed: int | None = None,
+        moment_tolerance: float = 0.05,
     ) -> GMMPrior:
-        """Fit a mixture to samples, choosing 1..max_components components by BIC.
+        """Fit a mixture to samples: the best by BIC of those that keep the marginal moments.
+
+        Components get full covariances when there are at least 10 samples per free
+        parameter of one, diagonal ones otherwise, and at most one component per 10 × its free
+        parameters (so 3 samples in 2-D give one diagonal Gaussian as wide as the samples,
+        not a 1e-6-wide spike). Covariances are floored at 1e-3 of each parameter's logit
+        variance. Among the fits, in order of BIC, the first whose marginal means and standard
+        deviations (physical units, from 20000 draws) are within ``moment_tolerance`` sample
+        standard deviations of the samples' is chosen; if none is, the best by BIC with each
+        logit coordinate mapped affinely so that the marginal means and sds match.
 
         Args:
             samples: an array (n, d) in the order of ``bounds``, a mapping name -> values, a
@@ -267,7 +326,8 @@ class GMMPrior(Prior):
                 posterior group).
             bounds: name -> (low, high), or a prior whose bounds to use.
             max_components: largest number of components tried.
-            seed: seeds scikit-learn's initialisation (same seed, same fit).
+            seed: seeds scikit-learn's initialisation and the moment check (same seed, same fit).
+            moment_tolerance: largest gap of a marginal mean or sd, in sample sds.
         """
         from sklearn.mixture import GaussianMixture  # heavy import, needed only here
 
@@ -291,15 +351,42 @@ class GMMPrior(Prior):
             )
         fraction = np.clip((matrix - lower) / (upper - lower), _EDGE, 1 - _EDGE)
         unbounded = logit(fraction)
-        best = None
-        for k in range(1, min(int(max_components), matrix.shape[0]) + 1):
-            mixture = GaussianMixture(n_components=k, covariance_type="full", random_state=seed)
-            mixture.fit(unbounded)
-            score = mixture.bic(unbounded)
-            if best is None or score < best[0]:
-                best = (score, mixture)
-        mixture = best[1]
-        return cls(checked, mixture.weights_, mixture.means_, mixture.covariances_)
+        # Fit on standardised logits, so that the covariance floor is relative to the spread.
+        centre = unbounded.mean(axis=0)
+        spread = unbounded.std(axis=0)
+        spread[spread <= 0] = 1.0
+        standard = (unbounded - centre) / spread
+        n, d = matrix.shape
+        covariance_type = (
+            "full" if n >= _SAMPLES_PER_FREE_PARAMETER * (d + d * (d + 1) // 2) else "diag"
+        )
+        per_component = d + (d * (d + 1) // 2 if covariance_type == "full" else d) + 1
+        largest = max(
+            1, min(int(max_components), n // (_SAMPLES_PER_FREE_PARAMETER * per_component))
+        )
+        fitted = []
+        for k in range(1, largest + 1):
+            mixture = GaussianMixture(
+                n_components=k,
+                covariance_type=covariance_type,
+                reg_covar=_COVARIANCE_FLOOR,
+                random_state=seed,
+            ).fit(standard)
+            covariances = mixture.covariances_
+            if covariance_type == "diag":
+                covariances = np.stack([np.diag(row) for row in covariances])
+            scale = np.outer(spread, spread)
+            prior = cls(
+                checked, mixture.weights_, centre + spread * mixture.means_, covariances * scale
+            )
+            fitted.append((mixture.bic(standard), prior))
+        fitted.sort(key=lambda pair: pair[0])
+        check = np.random.default_rng(seed)
+        gaps = [_moment_gap(prior, matrix, check) for _, prior in fitted]
+        faithful = [i for i, gap in enumerate(gaps) if gap <= moment_tolerance]
+        if faithful:
+            return fitted[faithful[0]][1]
+        return _with_marginal_moments(fitted[0][1], matrix, check)
 
     def _log_unbounded_density(self, unbounded: np.ndarray) -> np.ndarray:
         terms = np.empty((unbounded.shape[0], self.n_components))

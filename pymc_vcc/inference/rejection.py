@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -34,7 +35,16 @@ from pymc_vcc.execution.outcomes import FAILURE_KINDS, OK, crash_outcome, run_si
 from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
 from pymc_vcc.execution.store import SimulationRecord, SimulationStore
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
-from pymc_vcc.inference.noise import NOISE_PREFIX, add_output_noise, noise_parameter, with_noise
+from pymc_vcc.inference.noise import (
+    OutputNoise,
+    SensorNoise,
+    add_output_noise,
+    extended_prior,
+    is_noise_parameter,
+    noise_parameter,
+    sensor_parameter,
+    with_noise,
+)
 from pymc_vcc.inference.priors import Prior, check_prior_support
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
 from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator
@@ -82,6 +92,8 @@ class SimulationTask:
     model_columns: tuple[int, ...]
     noise_columns: tuple[int, ...]
     distance: BatchDistance
+    sensor_noise: OutputNoise | None
+    sensor_columns: tuple[int, ...]
     entropy: int
     spawn_key: tuple[int, ...]
     time_limit: float | None
@@ -89,11 +101,14 @@ class SimulationTask:
     def add_noise(
         self, values: np.ndarray, theta: np.ndarray, rng: np.random.Generator
     ) -> np.ndarray:
-        """Y + ν·|Y|·Z with ν per output (0 for outputs without a noise scale)."""
-        if all(column < 0 for column in self.noise_columns):
-            return values
-        scales = np.array([theta[c] if c >= 0 else 0.0 for c in self.noise_columns])
-        return add_output_noise(values, scales, rng)
+        """The paper's Y + ν·|Y|·Z (ν per output, 0 without a scale), then the sensor noise."""
+        if any(column >= 0 for column in self.noise_columns):
+            scales = np.array([theta[c] if c >= 0 else 0.0 for c in self.noise_columns])
+            values = add_output_noise(values, scales, rng)
+        if self.sensor_noise is not None:
+            learned = [theta[c] for c in self.sensor_columns if c >= 0]
+            values = self.sensor_noise.sample(values, rng, np.array(learned) if learned else None)
+        return values
 
     def __call__(self, items: list[tuple[int, int, np.ndarray]]) -> list[SimulationRecord]:
         records: list[SimulationRecord | None] = [None] * len(items)
@@ -218,7 +233,7 @@ def _prepare_observed(
 
 def _model_names(info: SimulatorInfo, prior: Prior) -> tuple[str, ...]:
     check_prior_support(info.support, prior.bounds)
-    model = tuple(name for name in prior.names if not name.startswith(NOISE_PREFIX))
+    model = tuple(name for name in prior.names if not is_noise_parameter(name))
     expected = info.parameter_names
     if expected is not None and set(expected) != set(model):
         missing = sorted(set(expected) - set(model))
@@ -323,6 +338,7 @@ def abc_rejection(
     n_main: int = 80000,
     n_desired: int = 4000,
     noise: Mapping[str, tuple[float, float]] | None = None,
+    sensor_noise: SensorNoise | None = None,
     outputs: Sequence[str] | None = None,
     distance: BatchDistance = ks_distances,
     executor: Executor | ExecutorKind = "processes",
@@ -346,6 +362,9 @@ def abc_rejection(
         n_desired: accepted draws at which the main phase stops (Table I: 4000).
         noise: output -> (low, high) bounds of its noise scale ν (dimensionless, ≥ 0); ν gets a
             uniform prior unless ``prior`` already holds ``nu_<output>``. None: no noise.
+        sensor_noise: sensor noise in engineering units added to every simulation before the
+            distance (learnable scales ``sigma_<output>`` if ``sensor_noise.learnable``);
+            observed outputs need ``units`` (K, Pa, kg/s, W) or ``sensor_noise.kinds``.
         outputs: outputs compared (default: all observed ones).
         distance: batch distance, (N, n_outputs, m) and (n_outputs, n) → (N,); default: the
             paper's KS distance.
@@ -378,6 +397,9 @@ def abc_rejection(
     info = check_simulator(simulator)
     data = _prepare_observed(info, observed, outputs)
     full_prior = with_noise(prior, noise, data.names)
+    output_noise = None if sensor_noise is None else sensor_noise.resolve(data)
+    if sensor_noise is not None:
+        full_prior = extended_prior(full_prior, sensor_noise.prior_bounds(data))
     model_names = _model_names(info, full_prior)
     entropy, spawn_key = split_seed(seed)
     settings = {
@@ -388,6 +410,7 @@ def abc_rejection(
         "n_desired": int(n_desired),
         "outputs": list(data.names),
         "noise": {key: list(map(float, pair)) for key, pair in (noise or {}).items()},
+        "sensor_noise": repr(sensor_noise),
         "parameters": list(full_prior.names),
         "prior": full_prior.kind,
         "prior_digest": _digest(*(v.values for _, v in sorted(full_prior.to_dataset().items()))),
@@ -424,6 +447,13 @@ def abc_rejection(
                 for output in data.names
             ),
             distance=distance,
+            sensor_noise=output_noise,
+            sensor_columns=tuple(
+                full_prior.names.index(sensor_parameter(output))
+                if sensor_parameter(output) in full_prior.names
+                else -1
+                for output in data.names
+            ),
             entropy=entropy,
             spawn_key=spawn_key,
             time_limit=time_limit,
@@ -449,6 +479,13 @@ def abc_rejection(
         if store is not None:
             store.close()
     n_main_run = n_main if scan.stop is None else scan.stop + 1
+    if scan.accepted <= len(full_prior.names):
+        warnings.warn(
+            f"{scan.accepted} accepted draws for {len(full_prior.names)} parameters: too few "
+            "to describe a posterior; raise n_main or the quantile",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     return _result_tree(
         full_prior.names,
         thetas,

@@ -19,7 +19,7 @@ import xarray as xr
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, executor_scope
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
-from pymc_vcc.inference.noise import with_noise
+from pymc_vcc.inference.noise import SensorNoise, extended_prior, with_noise
 from pymc_vcc.inference.priors import GMMPrior, Prior, prior_from_dataset
 from pymc_vcc.inference.rejection import abc_rejection, split_seed
 from pymc_vcc.inference.series import OutputData, prepare_observed
@@ -118,6 +118,7 @@ def sequential_calibration(
     n_main: int = 80000,
     n_desired: int = 4000,
     noise: Mapping[str, tuple[float, float]] | None = None,
+    sensor_noise: SensorNoise | None = None,
     outputs: Sequence[str] | None = None,
     distance: BatchDistance = ks_distances,
     executor: Executor | ExecutorKind = "processes",
@@ -162,8 +163,10 @@ def sequential_calibration(
         for k, (stage_simulator, observed) in enumerate(zip(simulators, datasets, strict=True)):
             if k == 0 or keep_uniform:
                 simulated = check_simulator(stage_simulator).output_names
-                used = prepare_observed(observed, outputs, output_names=simulated).names
-                prior = with_noise(first_prior, noise, used)
+                used = prepare_observed(observed, outputs, output_names=simulated)
+                prior = with_noise(first_prior, noise, used.names)
+                if sensor_noise is not None:
+                    prior = extended_prior(prior, sensor_noise.prior_bounds(used))
             else:
                 prior = GMMPrior.fit(
                     trees[-1],
@@ -182,6 +185,7 @@ def sequential_calibration(
                     n_main=n_main,
                     n_desired=n_desired,
                     noise=noise,
+                    sensor_noise=sensor_noise,
                     outputs=outputs,
                     distance=distance,
                     executor=pool,

@@ -7,6 +7,7 @@ from pymc_vcc.studies.common import BUDGETS, Budget, StudySettings
 from pymc_vcc.studies.estimate import EstimationResult, estimation_study
 from pymc_vcc.studies.leak import LeakResult, leak_study
 from pymc_vcc.studies.sobol import SobolResult, sobol_study
+from pymc_vcc.studies.validation import ValidationResult, validation_study
 
 __all__ = [
     "BUDGETS",
@@ -15,7 +16,9 @@ __all__ = [
     "LeakResult",
     "SobolResult",
     "StudySettings",
+    "ValidationResult",
     "estimation_study",
     "leak_study",
     "sobol_study",
+    "validation_study",
 ]

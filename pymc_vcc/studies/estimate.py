@@ -18,14 +18,14 @@ towards the posterior instead of discarding 95 % of its simulations.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pymc as pm
 import xarray as xr
 
 from pymc_vcc.execution.executors import Executor
-from pymc_vcc.inference.noise import with_noise
+from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
 from pymc_vcc.inference.pymc.model import add_simulator
@@ -129,6 +129,7 @@ def smc_sequential_calibration(
     executor: Executor,
     settings: StudySettings,
     seed: np.random.SeedSequence,
+    sensor_noise: SensorNoise | None = None,
 ) -> SequentialResult:
     """Algorithm 1 with SMC-ABC: each dataset's posterior, fitted by a Gaussian mixture, is the
     next dataset's prior. Each tree also gets a ``prior`` group of ``draws`` prior draws."""
@@ -140,7 +141,15 @@ def smc_sequential_calibration(
         sampler_seed, prior_seed = (int(x) for x in stage_seed.generate_state(2))
         prior = first_prior if k == 0 else GMMPrior.fit(trees[-1], first_prior, seed=prior_seed)
         with pm.Model():
-            add_simulator("outputs", simulator, observed, prior=prior, epsilon=epsilon)
+            add_simulator(
+                "outputs",
+                simulator,
+                observed,
+                prior=prior,
+                epsilon=epsilon,
+                sensor_noise=sensor_noise,
+                time_limit_s=settings.time_limit,
+            )
             tree = sample_smc_abc(
                 draws,
                 executor=executor,
@@ -174,6 +183,7 @@ def estimation_study(
     method: str = "rejection",
     smc_epsilon: float = 0.01,
     smc_draws: int | None = None,
+    sensor_noise: SensorNoise | None = None,
 ) -> EstimationResult:
     """Sequential calibration of all 26 parameters on two simulated datasets (Figs. 5 to 8).
 
@@ -187,6 +197,9 @@ def estimation_study(
         method: ``"rejection"`` (the paper's, Table I's budget) or ``"smc"`` (SMC-ABC).
         smc_epsilon: width ε of SMC-ABC's Gaussian kernel on the KS distance (in [0, 1]).
         smc_draws: SMC particles per dataset (default: the budget's ``smc_draws``).
+        sensor_noise: noise of the sensors, added to the reference data (with the seed) and
+            calibrated as learnable scales ``sigma_<output>`` in engineering units, in place of
+            the paper's relative ν; None: noise-free data and ν (the paper).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
@@ -204,9 +217,13 @@ def estimation_study(
             if attempt == max_attempts - 1:
                 raise
     observed = [ref.sel(time=slice(0.0, t_calibration)) for ref in references]
+    if sensor_noise is not None:
+        sensor_noise = replace(sensor_noise, learnable=True)
+        noise_rng = np.random.default_rng(draw_seed.spawn(1)[0])
+        observed = [sensor_noise.measure(data, noise_rng) for data in observed]
     calibration_model = VCCSimulator(unit, full.inputs, t_window=(0.0, t_calibration))
     prior = UniformPrior({spec.id: (spec.low, spec.high) for spec in unit.parameters})
-    noise = dict.fromkeys(OUTPUT_IDS, noise_bounds)
+    noise = None if sensor_noise else dict.fromkeys(OUTPUT_IDS, noise_bounds)
     with settings.open_executor() as executor:
         if method == "smc":
             calibration = smc_sequential_calibration(
@@ -218,6 +235,7 @@ def estimation_study(
                 executor=executor,
                 settings=settings,
                 seed=sampler_seed,
+                sensor_noise=sensor_noise,
             )
         else:
             calibration = sequential_calibration(
@@ -225,6 +243,7 @@ def estimation_study(
                 prior,
                 observed,
                 noise=noise,
+                sensor_noise=sensor_noise,
                 executor=executor,
                 checkpoint=settings.checkpoint_folder("estimate"),
                 seed=sampler_seed,

@@ -4,6 +4,11 @@ Datasets differ only in the total charge M0 (a progressing leak); each is calibr
 alone with a uniform prior (no sequential prior: the leak may have moved M0 far from the last
 posterior). Beyond the paper, a leak alarm gives the posterior probability that the charge is
 below a fraction of the as-commissioned charge (the first reference).
+
+With ``sensor_noise`` the reference data are measured as by real sensors (noise added with the
+dataset's seed) and every method accounts for it: the ABC samplers add the same noise to each
+simulation before the distance; ``"likelihood"`` uses the exact likelihood of the data under that
+noise with PyMC's tempered SMC.
 """
 
 from __future__ import annotations
@@ -18,11 +23,14 @@ import pymc as pm
 import xarray as xr
 
 from pymc_vcc.execution.progress import progress_enabled
+from pymc_vcc.inference.distances import BatchDistance, ks_distances
+from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.rejection import abc_rejection
-from pymc_vcc.physics.simulate import VCCSimulator, simulate
+from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit
 from pymc_vcc.plots import plot_charge_posteriors, save_figure
 from pymc_vcc.studies.common import (
@@ -33,8 +41,9 @@ from pymc_vcc.studies.common import (
     write_text,
 )
 
-Sampler = Literal["rejection", "smc"]
-SAMPLERS: tuple[str, ...] = ("rejection", "smc")
+Sampler = Literal["rejection", "smc", "likelihood"]
+SAMPLERS: tuple[str, ...] = ("rejection", "smc", "likelihood")
+INTERVAL = 0.95  # central posterior interval reported and checked for the truth
 CHARGE = "M0"
 
 
@@ -43,9 +52,10 @@ class LeakResult:
     """What the leak study found.
 
     Attributes:
-        table: Table II, one row per dataset: reference_kg, mean_kg, sd_kg, p_leak.
+        table: Table II, one row per dataset: reference_kg, mean_kg, sd_kg, p_leak, the 95 %
+            interval (low_kg, high_kg), whether it covers the reference, and simulations.
         trees: the posterior DataTree of each dataset.
-        sampler: ``"rejection"`` or ``"smc"``.
+        sampler: ``"rejection"``, ``"smc"`` or ``"likelihood"``.
         n_simulations: forward simulations the posteriors rest on (run, or resumed from
             checkpoints).
         wall_seconds: wall time of the whole study, s.
@@ -91,17 +101,28 @@ def leak_alarm(tree: xr.DataTree, threshold_kg: float) -> float:
     return float(np.mean(draws < threshold_kg)) if draws.size else float("nan")
 
 
-def _observed(unit: Unit, inputs: xr.Dataset, charge: float, t_end: float) -> xr.Dataset:
-    result = simulate(unit, {CHARGE: charge}, inputs, t_end=t_end)
+def reference_data(
+    simulator: VCCSimulator,
+    charge: float,
+    sensor_noise: SensorNoise | None = None,
+    rng: np.random.Generator | None = None,
+) -> xr.Dataset:
+    """The outputs of the unit at ``charge`` over the simulator's window, as sensors read them.
+
+    Without ``sensor_noise`` the simulation itself; with it, noise drawn from ``rng``.
+    """
+    result = simulator({CHARGE: charge})
     if result.attrs["status"] != "ok":
         raise RuntimeError(
             f"the reference simulation with {CHARGE} = {charge} kg failed: "
             f"{result.attrs['failure_reason']}"
         )
-    return result
+    if sensor_noise is None:
+        return result
+    return sensor_noise.measure(result, rng if rng is not None else np.random.default_rng())
 
 
-def _calibrate(
+def calibrate_charge(
     sampler: str,
     simulator: VCCSimulator,
     prior: UniformPrior,
@@ -109,34 +130,55 @@ def _calibrate(
     settings: StudySettings,
     executor,
     seed: np.random.SeedSequence,
-    stage: int,
+    checkpoint_name: str,
     epsilon: float,
+    sensor_noise: SensorNoise | None,
+    distance: BatchDistance,
 ) -> tuple[xr.DataTree, int]:
+    """The posterior of the charge on one dataset, and the simulations it took.
+
+    ``sensor_noise`` is the noise the sampler accounts for (None: none, as the paper);
+    ``checkpoint_name`` names its checkpoint under ``settings.out``.
+    """
     if sampler == "rejection":
         tree = abc_rejection(
             simulator,
             prior,
             observed,
             executor=executor,
-            checkpoint=settings.checkpoint(f"leak_{stage}"),
+            checkpoint=settings.checkpoint(checkpoint_name),
             seed=seed,
+            sensor_noise=sensor_noise,
+            distance=distance,
             **settings.rejection_options(),
         )
         return tree, int(tree["sample_stats"]["n_simulations"])
     with pm.Model():
-        add_simulator(
-            "outputs",
-            simulator,
-            observed,
-            prior=prior,
-            epsilon=epsilon,
-            time_limit_s=settings.time_limit,
-        )
+        if sampler == "likelihood":
+            add_likelihood(
+                "outputs",
+                simulator,
+                observed,
+                sensor_noise=sensor_noise,
+                prior=prior,
+                time_limit_s=settings.time_limit,
+            )
+        else:
+            add_simulator(
+                "outputs",
+                simulator,
+                observed,
+                prior=prior,
+                epsilon=epsilon,
+                sensor_noise=sensor_noise,
+                distance=distance,
+                time_limit_s=settings.time_limit,
+            )
         tree = sample_smc_abc(
             settings.work.smc_draws,
             executor=executor,
             random_seed=int(seed.generate_state(1)[0]),
-            checkpoint=settings.checkpoint(f"leak_smc_{stage}"),
+            checkpoint=settings.checkpoint(checkpoint_name),
             progressbar=progress_enabled(settings.progress),
         )
     stats = tree["sample_stats"]
@@ -154,22 +196,33 @@ def leak_study(
     t_calibration: float = 1060.0,
     alarm_fraction: float = 0.9,
     smc_epsilon: float = 0.02,
+    sensor_noise: SensorNoise | None = None,
+    distance: BatchDistance = ks_distances,
 ) -> LeakResult:
     """Calibrate the charge M0 on one simulated dataset per reference charge (Table II).
 
     Args:
         settings: budget, executor, seed and results folder.
         references_kg: true charges of the datasets, kg (the paper: 2.0, 1.5, 1.0).
-        sampler: ``"rejection"`` (the paper's) or ``"smc"`` (PyMC SMC-ABC, parallel kernel).
+        sampler: ``"rejection"`` (the paper's), ``"smc"`` (PyMC SMC-ABC, parallel kernel) or
+            ``"likelihood"`` (the exact likelihood under ``sensor_noise``, PyMC's tempered SMC).
         unit: unit description (default: the built-in one).
         inputs: input profile (default: the built-in step profile).
         t_calibration: calibration window [0, t_calibration] s (the paper: 1060 s).
         alarm_fraction: the alarm reports P(M0 < alarm_fraction · references_kg[0]).
-        smc_epsilon: width of SMC-ABC's Gaussian kernel on the KS distance.
+        smc_epsilon: width of SMC-ABC's Gaussian kernel on the distance.
+        sensor_noise: noise of the sensors: added to the reference data (with the dataset's
+            seed) and accounted for by the sampler; None: noise-free data (the paper).
+        distance: the ABC samplers' batch distance (default: the paper's KS distance).
     """
     started = time.perf_counter()
     if sampler not in SAMPLERS:
         raise ValueError(f"sampler must be one of {list(SAMPLERS)}, got {sampler!r}")
+    if sampler == "likelihood" and sensor_noise is None:
+        raise ValueError(
+            "sampler='likelihood' needs a sensor_noise (the likelihood of noise-free data is "
+            "degenerate); pass e.g. SensorNoise.typical()"
+        )
     if not 0 < alarm_fraction <= 1:
         raise ValueError(f"alarm_fraction must be in (0, 1], got {alarm_fraction}")
     unit = settings.unit(unit)
@@ -188,9 +241,20 @@ def leak_study(
     seeds = settings.seeds(len(references_kg))
     with settings.open_executor() as executor:
         for stage, (reference, seed) in enumerate(zip(references_kg, seeds, strict=True)):
-            observed = _observed(unit, simulator.inputs, reference, t_calibration)
-            tree, ran = _calibrate(
-                sampler, simulator, prior, observed, settings, executor, seed, stage, smc_epsilon
+            noise_rng = np.random.default_rng(seed.spawn(1)[0])
+            observed = reference_data(simulator, reference, sensor_noise, noise_rng)
+            tree, ran = calibrate_charge(
+                sampler,
+                simulator,
+                prior,
+                observed,
+                settings,
+                executor,
+                seed,
+                f"leak_{stage}" if sampler == "rejection" else f"leak_{sampler}_{stage}",
+                smc_epsilon,
+                sensor_noise,
+                distance,
             )
             draws = tree["posterior"][CHARGE].values.ravel()
             if draws.size < 2:
@@ -198,12 +262,17 @@ def leak_study(
                     f"the {sampler} sampler accepted {draws.size} draw(s) for the dataset with "
                     f"{CHARGE} = {reference} kg; raise the budget (n_main, quantile)"
                 )
+            low, high = np.quantile(draws, [(1 - INTERVAL) / 2, (1 + INTERVAL) / 2])
             rows.append(
                 {
                     "reference_kg": float(reference),
                     "mean_kg": float(draws.mean()),
                     "sd_kg": float(draws.std(ddof=1)),
                     "p_leak": leak_alarm(tree, threshold),
+                    "low_kg": float(low),
+                    "high_kg": float(high),
+                    "covered": bool(low <= reference <= high),
+                    "n_simulations": ran,
                 }
             )
             trees.append(tree)

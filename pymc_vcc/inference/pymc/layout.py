@@ -22,7 +22,7 @@ from pymc.distributions.simulator import SimulatorRV
 from pymc.model import Model
 
 from pymc_vcc.inference.pymc.model import SimulatorFunction
-from pymc_vcc.physics.cycle import OUTPUT_INFO
+from pymc_vcc.physics.cycles import OUTPUT_INFO
 
 COUNTS = {
     "simulations": "n_simulations",

@@ -35,7 +35,18 @@ from pytensor.tensor.variable import TensorVariable
 
 from pymc_vcc.execution.outcomes import SimulationOutcome, run_simulation
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
-from pymc_vcc.inference.noise import NOISE_PREFIX, add_output_noise, noise_parameter, with_noise
+from pymc_vcc.inference.noise import (
+    NOISE_PREFIX,
+    SENSOR_PREFIX,
+    OutputNoise,
+    SensorNoise,
+    add_output_noise,
+    extended_prior,
+    is_noise_parameter,
+    noise_parameter,
+    sensor_parameter,
+    with_noise,
+)
 from pymc_vcc.inference.priors import Bounds, GMMPrior, Prior, UniformPrior, check_prior_support
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
 from pymc_vcc.inference.simulator import Simulator, check_simulator
@@ -82,9 +93,10 @@ class DistanceKernel(Op):
 class SimulatorFunction:
     """The random function of the ``pm.Simulator`` node: parameters in, noisy outputs out.
 
-    Called by PyTensor as ``fn(rng, theta, [noise,] size)`` with ``theta`` the parameter
-    vector in ``parameter_names`` order and ``noise`` the ν vector in ``noise_outputs`` order;
-    returns the selected outputs (n_outputs, n_time), all NaN when the run failed.
+    Called by PyTensor as ``fn(rng, theta, [noise,] [sensor,] size)`` with ``theta`` the
+    parameter vector in ``parameter_names`` order, ``noise`` the ν vector in ``noise_outputs``
+    order and ``sensor`` the learnable sensor scales in ``observed.names`` order; returns the
+    selected outputs (n_outputs, n_time), all NaN when the run failed.
     :meth:`outcome` gives the same result with the failure kind and reason.
 
     Attributes:
@@ -93,6 +105,8 @@ class SimulatorFunction:
         observed: the validated observed data (selects and orders the outputs).
         noise_outputs: outputs with a noise scale, a subset of ``observed.names``.
         time_limit_s: wall-time limit of one run, s (None: none).
+        sensor_noise: sensor noise added after the paper's noise (None: none).
+        learn_sensor: whether the sensor scales come as an argument (learnable).
     """
 
     simulator: Simulator
@@ -100,6 +114,8 @@ class SimulatorFunction:
     observed: ObservedData
     noise_outputs: tuple[str, ...] = ()
     time_limit_s: float | None = None
+    sensor_noise: OutputNoise | None = None
+    learn_sensor: bool = False
 
     def __post_init__(self) -> None:
         if not self.parameter_names:
@@ -111,20 +127,31 @@ class SimulatorFunction:
                 f"{list(self.observed.names)}"
             )
 
-    def outcome(self, rng: np.random.Generator, theta, noise=None) -> SimulationOutcome:
+    def outcome(self, rng: np.random.Generator, theta, *scales) -> SimulationOutcome:
         """Run one simulation; failures are captured as in :func:`run_simulation`."""
+        scales = list(scales)
+        noise = scales.pop(0) if self.noise_outputs else None
+        sensor = scales.pop(0) if self.learn_sensor else None
         values = np.asarray(theta, dtype=float).reshape(-1, len(self.parameter_names))[0]
         parameters = dict(zip(self.parameter_names, map(float, values), strict=True))
         result = run_simulation(
             self.simulator, parameters, rng, self.observed, time_limit_s=self.time_limit_s
         )
-        if not result.ok or not self.noise_outputs:
+        if not result.ok:
             return result
-        scales = np.zeros(len(self.observed.names))
-        given = np.asarray(noise, dtype=float).reshape(-1, len(self.noise_outputs))[0]
-        for output, scale in zip(self.noise_outputs, given, strict=True):
-            scales[self.observed.names.index(output)] = scale
-        return replace(result, values=add_output_noise(result.values, scales, rng))
+        values = result.values
+        if self.noise_outputs:
+            relative = np.zeros(len(self.observed.names))
+            given = np.asarray(noise, dtype=float).reshape(-1, len(self.noise_outputs))[0]
+            for output, scale in zip(self.noise_outputs, given, strict=True):
+                relative[self.observed.names.index(output)] = scale
+            values = add_output_noise(values, relative, rng)
+        if self.sensor_noise is not None:
+            learned = None
+            if self.learn_sensor:
+                learned = np.asarray(sensor, dtype=float).reshape(-1, len(self.observed.names))[0]
+            values = self.sensor_noise.sample(values, rng, learned)
+        return replace(result, values=values)
 
     def __call__(self, rng: np.random.Generator, *args) -> np.ndarray:
         params = args[:-1]  # the last argument is PyTensor's ``size``, fixed by the observed
@@ -485,6 +512,7 @@ def add_simulator(
     prior: Prior | Mapping[str, tuple[float, float] | TensorVariable] | None = None,
     outputs: Sequence[str] | None = None,
     noise: Bounds | tuple[float, float] | None = None,
+    sensor_noise: SensorNoise | None = None,
     epsilon: float = 0.05,
     distance: str | BatchDistance = "ks",
     sum_stat: str | Callable = "identity",
@@ -517,6 +545,9 @@ def add_simulator(
         outputs: outputs compared (default: all outputs of ``observed``).
         noise: bounds of uniform priors on the noise scales ν: one pair for every output or a
             mapping output -> (low, high); None: no noise (unless ``prior`` names them).
+            Relative to the SI reading (the paper's ν); prefer ``sensor_noise``.
+        sensor_noise: sensor noise in engineering units added to every simulation before the
+            distance; learnable scales become variables ``sigma_<output>``.
         epsilon: width ε of the kernel, in distance units (KS: [0, 1]).
         distance: ``"ks"`` (the paper's KS distance averaged over outputs, with the Gaussian
             kernel −½ (d/ε)²), PyMC's ``"gaussian"`` or ``"laplace"`` (elementwise kernels of
@@ -544,9 +575,16 @@ def add_simulator(
     if noise is not None and not isinstance(noise, Mapping):
         noise = dict.fromkeys(data.names, noise)
     prior = _with_noise_bounds(prior, noise, data.names)
+    output_noise = None if sensor_noise is None else sensor_noise.resolve(data)
+    if sensor_noise is not None:
+        sensor_bounds = sensor_noise.prior_bounds(data)
+        prior = (
+            UniformPrior(sensor_bounds) if prior is None else extended_prior(prior, sensor_bounds)
+        )
     if prior is not None:
         check_prior_support(info.support, prior.bounds)
     names = [*given, *(prior.names if prior is not None else ())]
+    learn_sensor = sensor_noise is not None and sensor_parameter(data.names[0]) in names
 
     noise_outputs = tuple(out for out in data.names if noise_parameter(out) in names)
     stray_noise = [
@@ -557,7 +595,13 @@ def add_simulator(
             f"prior names noise scales {stray_noise} of outputs not compared; outputs: "
             f"{list(data.names)}"
         )
-    model_parameters = tuple(n for n in names if not n.startswith(NOISE_PREFIX))
+    sensor_scales = [n for n in names if n.startswith(SENSOR_PREFIX)]
+    if sensor_noise is None and sensor_scales:
+        raise ValueError(
+            f"prior names sensor-noise scales {sensor_scales} but no sensor_noise was given; "
+            "pass sensor_noise=SensorNoise(..., learnable=True)"
+        )
+    model_parameters = tuple(n for n in names if not is_noise_parameter(n))
     if parameters is not None and set(parameters) != set(model_parameters):
         raise ValueError(
             f"parameters {list(parameters)} differ from the prior's parameters "
@@ -572,7 +616,7 @@ def add_simulator(
         raise ValueError("the prior holds no simulator parameter to calibrate")
     bounds = _known_bounds(simulator)
     for parameter, variable in given.items():
-        limits = (0.0, np.inf) if parameter.startswith(NOISE_PREFIX) else bounds.get(parameter)
+        limits = (0.0, np.inf) if is_noise_parameter(parameter) else bounds.get(parameter)
         _check_within_bounds(parameter, variable, limits)
         if variable.name not in model.named_vars:  # an expression such as theta[0]: name it
             given[parameter] = pm.Deterministic(parameter, variable)
@@ -582,11 +626,20 @@ def add_simulator(
         **(prior_variables(prior, joint_name=f"{name}_theta") if prior is not None else {}),
     }
     function = SimulatorFunction(
-        simulator, model_parameters, data, noise_outputs, time_limit_s=time_limit_s
+        simulator,
+        model_parameters,
+        data,
+        noise_outputs,
+        time_limit_s=time_limit_s,
+        sensor_noise=output_noise,
+        learn_sensor=learn_sensor,
     )
     params = [pt.stack([variables[n] for n in model_parameters])]
     if noise_outputs:
         params.append(pt.stack([variables[noise_parameter(out)] for out in noise_outputs]))
+    if learn_sensor:
+        params.append(pt.stack([variables[sensor_parameter(out)] for out in data.names]))
+    cores = ",".join(f"({chr(ord('p') + k)})" for k in range(len(params)))
 
     time = data.dataset["time"].values if "time" in data.dataset.coords else None
     model.add_coord(f"{name}_output", list(data.names))
@@ -598,7 +651,7 @@ def add_simulator(
         distance=kernel,
         sum_stat=sum_stat,
         epsilon=float(epsilon),
-        signature="(p)->()" if len(params) == 1 else "(p),(q)->()",
+        signature=f"{cores}->()",
         observed=data.values,
         dims=(f"{name}_output", f"{name}_time"),
     )

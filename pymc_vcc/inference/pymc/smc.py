@@ -78,7 +78,7 @@ from pymc_vcc.execution.executors import (
 from pymc_vcc.execution.outcomes import OK, SimulationOutcome, crash_outcome
 from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore
 from pymc_vcc.inference.pymc.layout import standard_layout
-from pymc_vcc.inference.pymc.model import SimulatorFunction
+from pymc_vcc.inference.pymc.model import DistanceKernel, SimulatorFunction
 
 logger = logging.getLogger(__name__)
 
@@ -235,6 +235,7 @@ class ParallelIMH(IMH):
         "failed_simulations": (int, []),
         "resumed_simulations": (int, []),
         "stage_seconds": (float, []),
+        "ess": (float, []),
     }
 
     def __init__(
@@ -424,6 +425,7 @@ class ParallelIMH(IMH):
             "failed_simulations": self._stage_failures,
             "resumed_simulations": self._stage_resumed,
             "stage_seconds": now - self._stage_start,
+            "ess": float(1.0 / np.sum(self.weights**2)),
         }
         self._stage_simulations = 0
         self._stage_failures = 0
@@ -439,6 +441,7 @@ class ParallelIMH(IMH):
             "n_resumed_simulations": self.total_resumed,
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
             "failure_examples": " | ".join(self.failure_reasons),
+            "median_log_likelihood": float(np.median(self.likelihood_logp)),
             "executor": repr(self.executor),
         }
 
@@ -524,8 +527,11 @@ def sample_smc_abc(
     Returns:
         The DataTree of ``pm.sample_smc`` in the layout of
         :func:`~pymc_vcc.inference.pymc.layout.standard_layout`: ``posterior``,
-        ``sample_stats`` over ``(chain, stage)`` with the simulation totals of all chains in its
-        attrs, ``observed_data`` with one variable per output.
+        ``sample_stats`` over ``(chain, stage)`` (simulation counts and ESS per stage) with the
+        run summary in its attrs (``n_simulations`` over all chains, ``n_stages`` per chain,
+        ``epsilon`` per simulator node, ``min_stage_ess``), ``observed_data`` with one variable
+        per output. Warns (RuntimeWarning) when draws are fewer than the parameters, a stage's
+        ESS falls below 30 or the final distances sit far above ε.
     """
     if int(chains) != chains or chains < 1:
         raise ValueError(f"chains must be a positive integer, got {chains}")
@@ -547,6 +553,15 @@ def sample_smc_abc(
         settings = _run_settings(model, draws, chains, threshold, correlation_threshold)
         store = LikelihoodStore(checkpoint, settings, random_seed)
         random_seed = store.entropy
+    n_parameters = sum(model.initial_point()[v.name].size for v in model.value_vars)
+    if draws < n_parameters:
+        warnings.warn(
+            f"draws={draws} particles for {n_parameters} parameters: a population smaller than "
+            "the parameter count collapses onto a few points and reports a falsely narrow "
+            f"posterior; use draws >= {10 * n_parameters}",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     try:
         with executor_scope(executor, n_workers) as opened, warnings.catch_warnings():
             # The distance kernel is a Python Op by design: the simulations run outside PyTensor.
@@ -565,10 +580,64 @@ def sample_smc_abc(
                 correlation_threshold=correlation_threshold,
                 **kwargs,
             )
-        return standard_layout(tree, model)
+        return _with_run_summary(standard_layout(tree, model), model)
     finally:
         if store is not None:
             store.close()
+
+
+MIN_ESS = 30
+"""Effective sample size below which a stage's particles are too few to trust."""
+
+MAX_DISTANCE_RATIO = 3.0
+"""Median final distance over ε above which the ABC kernel is too narrow for the simulator."""
+
+
+def _per_chain(values: np.ndarray) -> list[np.ndarray]:
+    """A ``(chain, stage)`` statistic of the standard layout as one array of stages per chain
+    (the padding after a chain's last stage dropped)."""
+    return [row[np.isfinite(row)] for row in np.atleast_2d(np.asarray(values, dtype=float))]
+
+
+def _with_run_summary(tree: DataTree, model: Model) -> DataTree:
+    """Record ε, stages and simulations (run and resumed) over all chains in ``sample_stats``
+    of the standard layout; warn on the
+    signs of an untrustworthy posterior (stage ESS below :data:`MIN_ESS`, final distances far
+    above ε)."""
+    stats = tree["sample_stats"].to_dataset()
+    per_chain = _per_chain(stats["simulations"].values)
+    resumed = _per_chain(stats["resumed_simulations"].values)
+    ess = np.concatenate(_per_chain(stats["ess"].values))
+    nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
+    epsilon = [float(getattr(rv.owner.op.epsilon, "data", rv.owner.op.epsilon)) for rv in nodes]
+    total = int(sum(row.sum() for row in per_chain) + sum(row.sum() for row in resumed))
+    summary = {
+        "n_simulations": ((), total),
+        "n_stages": ("chain", [row.size for row in per_chain]),
+        "epsilon": ("simulator_node", epsilon),
+        "min_stage_ess": ((), float(ess.min()) if ess.size else np.nan),
+    }
+    stats = stats.assign(summary).assign_coords(simulator_node=[rv.name for rv in nodes])
+    tree["sample_stats"] = stats
+    if ess.size and ess.min() < MIN_ESS:
+        warnings.warn(
+            f"an SMC stage's effective sample size fell to {ess.min():.0f} (< {MIN_ESS}): the "
+            "posterior rests on too few distinct particles; raise draws",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    if nodes and all(isinstance(rv.owner.op._distance, DistanceKernel) for rv in nodes):
+        median = np.median(np.asarray(stats.attrs.get("median_log_likelihood", np.nan)))
+        ratio = float(np.sqrt(max(-2.0 * median, 0.0)))
+        if ratio > MAX_DISTANCE_RATIO:
+            warnings.warn(
+                f"the final particles' distances sit about {ratio:.1f} ε above ε = {epsilon}: "
+                "the simulations cannot come as close to the data as ε asks (noisy data "
+                "compared with noise-free simulations?); add sensor_noise or raise epsilon",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+    return tree
 
 
 __all__ = ["ParallelIMH", "sample_smc_abc"]
