@@ -21,14 +21,15 @@ from pytensor.graph.op import Op
 
 from pymc_vcc.inference.likelihood import log_likelihood
 from pymc_vcc.inference.noise import OutputNoise, SensorNoise
-from pymc_vcc.inference.priors import Bounds, Prior, UniformPrior
+from pymc_vcc.inference.priors import Bounds, Prior, UniformPrior, check_prior_support
 from pymc_vcc.inference.pymc.model import (
     SimulatorFunction,
     SimulatorNode,
     prior_variables,
     simulator_bounds,
 )
-from pymc_vcc.inference.series import OutputData, Simulator, prepare_observed
+from pymc_vcc.inference.series import OutputData, prepare_observed
+from pymc_vcc.inference.simulator import Simulator, check_simulator
 
 
 class LogLikelihoodKernel(Op):
@@ -89,7 +90,8 @@ def add_likelihood(
             "add_likelihood takes known noise scales (SensorNoise(learnable=False)); learnable "
             "scales are calibrated by the ABC paths (add_simulator, abc_rejection)"
         )
-    data = prepare_observed(observed, outputs, getattr(simulator, "output_names", None))
+    info = check_simulator(simulator)
+    data = prepare_observed(observed, outputs, info.output_names)
     noise = sensor_noise.resolve(data)
     if prior is None:
         prior = UniformPrior(simulator_bounds(simulator, parameters))
@@ -99,7 +101,8 @@ def add_likelihood(
         raise ValueError(
             f"parameters {list(parameters)} differ from the prior's parameters {list(prior.names)}"
         )
-    known = getattr(simulator, "parameter_names", None)
+    check_prior_support(info.support, prior.bounds)
+    known = info.parameter_names
     unknown = [n for n in prior.names if known is not None and n not in known]
     if unknown:
         raise ValueError(f"unknown parameter(s) {unknown}; the simulator has {list(known)}")
