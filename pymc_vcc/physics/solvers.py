@@ -251,6 +251,7 @@ class CvodeSolver:
         self.counters.n_rhs += 1
         self._t = t
         self._y[:] = y
+        assert self._rhs is not None, "integrate() sets the model before CVODE calls back"
         if not self._rhs(self._y, dydt):
             # scikit-sundae cannot pass CVODE a recoverable error, and CVODE's tests let NaN
             # through: a huge finite derivative fails the step, which is retried shorter
@@ -263,6 +264,7 @@ class CvodeSolver:
         self.counters.n_jac += 1
         self._y[:] = y
         self._f[:] = f
+        assert self._jac is not None, "integrate() sets the model before CVODE calls back"
         matrix[:, :] = _clean(self._jac(self._y, self._f))
 
     def integrate(self, rhs, jac, y0, t0, t1, t_out, states_out, deadline):

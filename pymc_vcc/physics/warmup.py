@@ -15,6 +15,7 @@ import multiprocessing
 import sys
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -44,8 +45,9 @@ def _announce() -> None:
 
 def _is_cached(model: CycleModel) -> bool:
     """Whether Numba's disk cache holds the cycle's kernels (then they load, not compile)."""
+    kernel: Any = model.evaluate  # a Numba dispatcher
     try:
-        return Path(model.evaluate._cache._cache_file._index_path).exists()
+        return Path(kernel._cache._cache_file._index_path).exists()
     except AttributeError:  # Numba internals changed: assume a compile
         return False
 
