@@ -142,10 +142,10 @@ def test_estimate_with_smc_and_cvode(tmp_path, capsys):
     assert 2 * 4 <= summary["n_simulations"] < 2 * 4 * 100
     assert len(summary["sd_ratio"]) == 2 and len(summary["sd_ratio"][1]) == 26
     assert all(0 <= ratio < 1.5 for ratio in summary["sd_ratio"][0].values())
-    tree = xr.open_datatree(out / "estimate" / "predictive_1.nc", engine="h5netcdf")
+    tree = xr.open_datatree(out / "predictive_1.nc", engine="h5netcdf")
     assert {"prior", "posterior", "posterior_predictive"} <= set(tree.children)
     assert tree["prior"]["M0"].size == 4
-    assert (out / "estimate" / "fig5_kde_dataset1.png").exists()
+    assert (out / "fig5_kde_dataset1.png").exists()
 
 
 def test_sobol_command_writes_heatmaps(tmp_path, capsys):
