@@ -92,11 +92,11 @@ class SimulationTask:
     model_columns: tuple[int, ...]
     noise_columns: tuple[int, ...]
     distance: BatchDistance
-    sensor_noise: OutputNoise | None
-    sensor_columns: tuple[int, ...]
     entropy: int
     spawn_key: tuple[int, ...]
     time_limit: float | None
+    sensor_noise: OutputNoise | None = None
+    sensor_columns: tuple[int, ...] = ()
 
     def add_noise(
         self, values: np.ndarray, theta: np.ndarray, rng: np.random.Generator
