@@ -38,13 +38,24 @@ def _numbers(row: np.ndarray) -> np.ndarray:
     return np.concatenate([np.asarray(entry, dtype=float).ravel() for entry in row])
 
 
-def stage_statistics(sample_stats: xr.Dataset) -> xr.Dataset:
-    """``sample_stats`` with every ragged per-stage statistic over ``(chain, stage)``."""
+def stage_statistics(sample_stats: xr.Dataset, n_chains: int | None = None) -> xr.Dataset:
+    """``sample_stats`` with every per-stage statistic over ``(chain, stage)``: ragged lists of
+    several chains, and the stages of a single chain (``n_chains == 1``), which PyMC lays out
+    along ``chain``."""
+    single = n_chains == 1 and sample_stats.sizes.get("chain", 1) != 1
+    if single:
+        sample_stats = sample_stats.expand_dims("smc_chain").rename(chain="stage_index")
+        sample_stats = sample_stats.rename(smc_chain="chain").drop_vars("stage_index")
     per_stage = {}
     for name, variable in sample_stats.data_vars.items():
-        if variable.dtype != object or variable.dims[:1] != ("chain",):
+        if variable.dims[:1] != ("chain",):
             continue
-        chains = [_numbers(np.atleast_1d(row)) for row in variable.values]
+        if variable.dtype != object and not (single and variable.ndim == 2):
+            continue
+        if single:
+            chains = [np.asarray(row, dtype=float) for row in variable.values]
+        else:
+            chains = [_numbers(np.atleast_1d(row)) for row in variable.values]
         width = max(len(stages) for stages in chains)
         table = np.full((len(chains), width), np.nan)
         for index, stages in enumerate(chains):
@@ -55,6 +66,8 @@ def stage_statistics(sample_stats: xr.Dataset) -> xr.Dataset:
     )
     for name, (_, table) in per_stage.items():
         result[name] = (("chain", "stage"), table)
+    if "chain" in result.dims and "chain" not in result.coords:
+        result = result.assign_coords(chain=np.arange(result.sizes["chain"]))
     if per_stage:
         result = result.assign_coords(stage=np.arange(result.sizes["stage"]))
         result["stage"].attrs["long_name"] = "SMC stage (tempering step)"
@@ -96,7 +109,8 @@ def standard_layout(tree: xr.DataTree, model: Model) -> xr.DataTree:
     result = tree.copy()
     if "sample_stats" in result.children:
         stats = result["sample_stats"].to_dataset()
-        result["sample_stats"] = xr.DataTree(stage_statistics(stats))
+        n_chains = result["posterior"].sizes["chain"] if "posterior" in result.children else None
+        result["sample_stats"] = xr.DataTree(stage_statistics(stats, n_chains))
     observed = observed_outputs(model)
     if observed.data_vars and "observed_data" in result.children:
         attrs = result["observed_data"].attrs

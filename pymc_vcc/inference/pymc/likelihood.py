@@ -123,7 +123,7 @@ def add_likelihood(
         observed=data.values,
         dims=(f"{name}_output", f"{name}_time"),
     )
-    return SimulatorNode(variable, prior, prior.names, (), data, function)
+    return SimulatorNode(variable, prior, prior.names, (), data, function, variables)
 
 
 __all__ = ["LogLikelihoodKernel", "add_likelihood"]
