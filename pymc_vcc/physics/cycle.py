@@ -27,6 +27,7 @@ from numba import njit
 
 from pymc_vcc.physics.components.compressor import (
     compressor,
+    compressor_mass_flow,
     protection_speed_factor,
     volumetric_efficiency,
 )
@@ -41,7 +42,7 @@ from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
 from pymc_vcc.physics.components.heat_transfer import air_side_heat, refrigerant_htc, wall_heat
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
-from pymc_vcc.physics.components.suction_tank import tank_outlet_enthalpy
+from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
 from pymc_vcc.physics.parameters import PARAMETER_IDS
 from pymc_vcc.physics.refrigerant import saturation_state, state
 from pymc_vcc.physics.unit import Unit
@@ -65,12 +66,20 @@ OUTPUT_INFO: dict[str, tuple[str, str]] = {
 DIAGNOSTIC_INFO: dict[str, tuple[str, str]] = {
     "Q_cond": ("Heat rejected by the condenser refrigerant", "W"),
     "Q_evap": ("Heat absorbed by the evaporator refrigerant", "W"),
-    "W_comp": ("Compressor shaft power", "W"),
+    "W_comp": ("Compressor electrical power", "W"),
     "W_ref": ("Net compressor power to the refrigerant", "W"),
     "W_fans": ("Fan power", "W"),
     "M": ("Total refrigerant mass", "kg"),
     "mdot_src": ("Charge-controller mass source", "kg/s"),
     "mdot_valve": ("Expansion-valve mass flow", "kg/s"),
+    "W_is": ("Compressor isentropic power", "W"),
+    "Q_comp_amb": ("Compressor heat to the ambient (shell, drive, thermal limit)", "W"),
+    "V_air_out": ("Outdoor-coil air flow", "m3/s"),
+    "V_air_in": ("Indoor-coil air flow", "m3/s"),
+    "tank_level": ("Suction-tank liquid volume fraction", "1"),
+    "dp_cond": ("Condenser pressure drop", "Pa"),
+    "dp_evap": ("Evaporator pressure drop", "Pa"),
+    "dp_vap": ("Vapour-line pressure drop", "Pa"),
 }
 """Further quantities available from :func:`evaluate` (index = 9 + position)."""
 
@@ -101,13 +110,15 @@ N_EVAL = len(OUTPUT_IDS) + len(DIAGNOSTIC_INFO)
     C_MNOM_EVAP,
     C_CAP_COND,  # air capacity rate per cell, W/K
     C_CAP_EVAP,
+    C_FLOW_OUT,  # air flows, m3/s
+    C_FLOW_IN,
     C_P_FAN_OUT,  # fan powers, W
     C_P_FAN_IN,
     C_DISPLACEMENT,
     C_CLEARANCE,
     C_EXPONENT,
     C_ETA_IS,
-    C_REF_FRACTION,
+    C_LOSS_SHARE,
     C_SHELL_UA,
     C_CF_VOL,
     C_CF_POW,
@@ -125,14 +136,16 @@ N_EVAL = len(OUTPUT_IDS) + len(DIAGNOSTIC_INFO)
     C_T_DIS_MAX,  # compressor thermal limit, K
     C_P_PROT_START,  # high-pressure protection, Pa
     C_P_PROT_STOP,
+    C_BLEED_FULL,  # liquid mass fraction of the tank outflow when full, -
     N_CONSTANTS,
-) = range(48)
+) = range(51)
 
 # regularisation widths
 _FLOW_EPS = 1e-4  # kg/s, upwind weights and |ṁ| in pressure drops
 _SRC_EPS = 1e-5  # kg/s, sign of the charge-controller source
 _DP_REG = 2e4  # Pa, valve square root
 _TANK_WIDTH = 2e3  # J/kg, tank outlet smooth max
+_DP_ITERATIONS = 3  # fixed-point passes for the flow through the lumped pressure drops
 
 
 def n_states(n_volumes: int) -> int:
@@ -198,11 +211,13 @@ def build_constants(unit: Unit, theta: np.ndarray, controller: bool | None = Non
     c[C_MNOM_EVAP] = evap.nominal_mass_flow
     air = unit.air
     flow_out, power_out = fan_operating_point(
-        p["FO_FLOW"], p["FO_POW"], p["FO_SPEED"], unit.outdoor_fan.operating_speed
+        p["FO_FLOW"], p["FO_POW"], p["FO_SPEED"], p["FO_SPEED"] * unit.outdoor_fan.speed_fraction
     )
     flow_in, power_in = fan_operating_point(
-        p["FI_FLOW"], p["FI_POW"], p["FI_SPEED"], unit.indoor_fan.operating_speed
+        p["FI_FLOW"], p["FI_POW"], p["FI_SPEED"], p["FI_SPEED"] * unit.indoor_fan.speed_fraction
     )
+    c[C_FLOW_OUT] = flow_out
+    c[C_FLOW_IN] = flow_in
     c[C_CAP_COND] = air_capacity_rate(flow_out, air.density, air.specific_heat) / n
     c[C_CAP_EVAP] = air_capacity_rate(flow_in, air.density, air.specific_heat) / n
     c[C_P_FAN_OUT] = power_out
@@ -212,20 +227,22 @@ def build_constants(unit: Unit, theta: np.ndarray, controller: bool | None = Non
     c[C_CLEARANCE] = comp.clearance
     c[C_EXPONENT] = comp.polytropic_exponent
     c[C_ETA_IS] = comp.isentropic_efficiency
-    c[C_REF_FRACTION] = comp.refrigerant_power_fraction
+    c[C_LOSS_SHARE] = comp.loss_share_to_refrigerant
     c[C_SHELL_UA] = comp.shell_ua
     c[C_T_DIS_MAX] = comp.max_discharge_temperature
     c[C_P_PROT_START] = comp.protection_pressure_start
     c[C_P_PROT_STOP] = comp.protection_pressure_stop
     c[C_VALVE_AREA] = unit.expansion_valve.flow_area
+    c[C_BLEED_FULL] = unit.suction_tank.bleed_fraction_full
     f = unit.pressure_drop.darcy_friction_factor
     c[C_K_LIQ] = friction_coefficient(f, p["L_LIQ"], unit.liquid_line.inner_diameter)
     c[C_K_VAP] = friction_coefficient(f, p["L_VAP"], unit.vapor_line.inner_diameter)
+    coil = f * unit.pressure_drop.coil_multiplier
     c[C_K_COND] = p["CF_DPC"] * friction_coefficient(
-        f, p["L_COND"], cond.tube_inner_diameter, cond.n_paths
+        coil, p["L_COND"], cond.tube_inner_diameter, cond.n_paths
     )
     c[C_K_EVAP] = p["CF_DPE"] * friction_coefficient(
-        f, p["L_EVAP"], evap.tube_inner_diameter, evap.n_paths
+        coil, p["L_EVAP"], evap.tube_inner_diameter, evap.n_paths
     )
     enabled = unit.controller.enabled if controller is None else controller
     kp = unit.controller.kp if enabled else 0.0
@@ -314,37 +331,45 @@ def balances(y, u, c, tables, props, dydt, out):
     rh_e = props[3, nc:]
     x_e = props[4, nc:]
     mass = 0.0
-    mass_cond = 0.0
-    mass_evap = 0.0
+    volume_c = 0.0  # Σ 1/ρ over the coil cells, m3/kg
+    volume_e = 0.0
     for i in range(nc):
         mass += vol_c[i] * rho_c[i]
         if i < n:
-            mass_cond += vol_c[i] * rho_c[i]
+            volume_c += 1.0 / rho_c[i]
     for i in range(ne):
         mass += vol_e[i] * rho_e[i]
         if i < n:
-            mass_evap += vol_e[i] * rho_e[i]
+            volume_e += 1.0 / rho_e[i]
     if not math.isfinite(mass):
         out[:] = np.nan
         dydt[:] = np.nan
         return False
-    rho_mean_c = mass_cond / (n * c[C_V_COND])
-    rho_mean_e = mass_evap / (n * c[C_V_EVAP])
+    # homogeneous friction along a coil goes with its mean specific volume
+    rho_friction_c = n / volume_c
+    rho_friction_e = n / volume_e
 
-    # ---- suction tank, suction pressure, compressor
-    h_vap_e = saturation_state(tables, p_e)[2]
-    h_suc = tank_outlet_enthalpy(h_ze[n + 1], h_vap_e, _TANK_WIDTH)
-    rho_out = state(tables, p_e, h_suc)[1]
-    eta_guess = volumetric_efficiency(p_c / p_e, c[C_CLEARANCE], c[C_EXPONENT], c[C_CF_VOL])
-    speed = speed * protection_speed_factor(p_c, c[C_P_PROT_START], c[C_P_PROT_STOP])
-    m_guess = eta_guess * rho_out * c[C_DISPLACEMENT] * speed
-    dp_suction = pressure_drop(c[C_K_EVAP], m_guess, rho_mean_e, _FLOW_EPS) + pressure_drop(
-        c[C_K_VAP], m_guess, rho_out, _FLOW_EPS
+    # ---- suction tank (bleed), pressure drops at the compressor's own flow, compressor
+    sat_e = saturation_state(tables, p_e)
+    level = liquid_level(rho_e[n + 1], sat_e[3], sat_e[4])
+    h_suc = tank_outlet_enthalpy(
+        h_ze[n + 1], sat_e[1], sat_e[2], level, c[C_BLEED_FULL], _TANK_WIDTH
     )
-    p_s = p_e - dp_suction
-    T_s, rho_s = state(tables, p_s, h_suc)[:2]
-    p_d = p_c + pressure_drop(c[C_K_COND], m_guess, rho_mean_c, _FLOW_EPS)
-    m_comp, h_d, w_comp, w_ref = compressor(
+    rho_out = state(tables, p_e, h_suc)[1]
+    speed = speed * protection_speed_factor(p_c, c[C_P_PROT_START], c[C_P_PROT_STOP])
+    p_s, p_d, rho_s = p_e, p_c, rho_out
+    dp_cond = dp_evap = dp_vap = 0.0
+    for _ in range(_DP_ITERATIONS):  # fixed-point on ṁ(p_s, p_d); contracts by ~0.05 a pass
+        eta = volumetric_efficiency(p_d / p_s, c[C_CLEARANCE], c[C_EXPONENT], c[C_CF_VOL])
+        m_flow = compressor_mass_flow(rho_s, speed, c[C_DISPLACEMENT], eta)
+        dp_cond = pressure_drop(c[C_K_COND], m_flow, rho_friction_c, _FLOW_EPS)
+        dp_evap = pressure_drop(c[C_K_EVAP], m_flow, rho_friction_e, _FLOW_EPS)
+        dp_vap = pressure_drop(c[C_K_VAP], m_flow, rho_out, _FLOW_EPS)
+        p_s = p_e - dp_evap - dp_vap
+        p_d = p_c + dp_cond
+        rho_s = state(tables, p_s, h_suc)[1]
+    T_s = state(tables, p_s, h_suc)[0]
+    m_comp, h_d, w_comp, w_ref, w_is, q_comp_amb = compressor(
         tables,
         p_s,
         h_suc,
@@ -356,7 +381,7 @@ def balances(y, u, c, tables, props, dydt, out):
         c[C_CLEARANCE],
         c[C_EXPONENT],
         c[C_ETA_IS],
-        c[C_REF_FRACTION],
+        c[C_LOSS_SHARE],
         c[C_SHELL_UA],
         c[C_CF_VOL],
         c[C_CF_POW],
@@ -442,6 +467,14 @@ def balances(y, u, c, tables, props, dydt, out):
     out[14] = mass
     out[15] = m_src
     out[16] = m_valve
+    out[17] = w_is
+    out[18] = q_comp_amb
+    out[19] = c[C_FLOW_OUT]
+    out[20] = c[C_FLOW_IN]
+    out[21] = level
+    out[22] = dp_cond
+    out[23] = dp_evap
+    out[24] = dp_vap
     return bool(np.isfinite(dydt).all())
 
 
