@@ -39,7 +39,7 @@ from pymc_vcc.physics.components.fan import (
     fan_operating_point,
 )
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
-from pymc_vcc.physics.components.heat_transfer import air_side_heat, refrigerant_htc, wall_heat
+from pymc_vcc.physics.components.heat_transfer import air_side_heat, cell_mean_htc, wall_heat
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
 from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
@@ -413,16 +413,21 @@ def balances(y, u, c, tables, props, dydt, out):
     q_evap = 0.0
     flow_c = abs(m_comp) / c[C_MNOM_COND]
     flow_e = abs(m_valve) / c[C_MNOM_EVAP]
+    sat_c = saturation_state(tables, p_c)
+    x_in_c = (h_d - sat_c[1]) / (sat_c[2] - sat_c[1])  # qualities entering each coil
+    x_in_e = (h_zc[n] - sat_e[1]) / (sat_e[2] - sat_e[1])
     for i in range(n):
         tw = y[n + 2 + i]
-        alpha = refrigerant_htc(x_c[i], c[C_HTC_CL], c[C_HTC_CTP], c[C_HTC_CV], flow_c)
+        x_in = x_in_c if i == 0 else x_c[i - 1]
+        alpha = cell_mean_htc(x_in, x_c[i], c[C_HTC_CL], c[C_HTC_CTP], c[C_HTC_CV], flow_c)
         q_ref = wall_heat(alpha, c[C_AR_COND], tw, T_c[i])
         q_air = air_side_heat(cap_c, T_air_c, tw, c[C_HTC_CA], c[C_AA_COND])
         dydt[n + 2 + i] = (q_air - q_ref) / c[C_CW_COND]
         src_c[i] = q_ref
         q_cond -= q_ref
         tw = y[3 * n + 5 + i]
-        alpha = refrigerant_htc(x_e[i], c[C_HTC_EL], c[C_HTC_ETP], c[C_HTC_EV], flow_e)
+        x_in = x_in_e if i == 0 else x_e[i - 1]
+        alpha = cell_mean_htc(x_in, x_e[i], c[C_HTC_EL], c[C_HTC_ETP], c[C_HTC_EV], flow_e)
         q_ref = wall_heat(alpha, c[C_AR_EVAP], tw, T_e[i])
         q_air = air_side_heat(cap_e, T_air_e, tw, c[C_HTC_EA], c[C_AA_EVAP])
         dydt[3 * n + 5 + i] = (q_air - q_ref) / c[C_CW_EVAP]

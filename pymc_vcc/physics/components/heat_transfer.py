@@ -55,3 +55,27 @@ def air_side_heat(
 def wall_heat(htc: float, area: float, T_wall: float, T_fluid: float) -> float:
     """Convective heat from a wall to a fluid, W."""
     return htc * area * (T_wall - T_fluid)
+
+
+@njit(cache=True, error_model="numpy")
+def cell_mean_htc(
+    quality_in: float,
+    quality_out: float,
+    htc_liquid: float,
+    htc_two_phase: float,
+    htc_vapor: float,
+    flow_ratio: float,
+) -> float:
+    """Mean refrigerant HTC over a cell whose quality runs linearly from its inlet to its outlet
+    value, W/(m² K) (Simpson's rule on :func:`refrigerant_htc`).
+
+    A cell containing the dew or bubble point then sees the length-weighted mix of the phases'
+    coefficients, which changes as smoothly as the cell's inlet and outlet states do, instead
+    of switching as its single state crosses a blend (which excited a limit cycle at N = 10).
+    """
+    middle = 0.5 * (quality_in + quality_out)
+    return (
+        refrigerant_htc(quality_in, htc_liquid, htc_two_phase, htc_vapor, flow_ratio)
+        + 4.0 * refrigerant_htc(middle, htc_liquid, htc_two_phase, htc_vapor, flow_ratio)
+        + refrigerant_htc(quality_out, htc_liquid, htc_two_phase, htc_vapor, flow_ratio)
+    ) / 6.0
