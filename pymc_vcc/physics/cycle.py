@@ -40,6 +40,7 @@ from pymc_vcc.physics.components.fan import (
 )
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
 from pymc_vcc.physics.components.heat_transfer import air_side_heat, cell_mean_htc, wall_heat
+from pymc_vcc.physics.components.moist_air import humidity_ratio, latent_heat
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
 from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
@@ -80,6 +81,8 @@ DIAGNOSTIC_INFO: dict[str, tuple[str, str]] = {
     "dp_cond": ("Condenser pressure drop", "Pa"),
     "dp_evap": ("Evaporator pressure drop", "Pa"),
     "dp_vap": ("Vapour-line pressure drop", "Pa"),
+    "Q_latent": ("Latent heat of the indoor coil (condensation)", "W"),
+    "SHR": ("Sensible heat ratio of the indoor coil", "1"),
 }
 """Further quantities available from :func:`evaluate` (index = 9 + position)."""
 
@@ -137,8 +140,9 @@ N_EVAL = len(OUTPUT_IDS) + len(DIAGNOSTIC_INFO)
     C_P_PROT_START,  # high-pressure protection, Pa
     C_P_PROT_STOP,
     C_BLEED_FULL,  # liquid mass fraction of the tank outflow when full, -
+    C_CP_AIR,  # specific heat of air, J/(kg K)
     N_CONSTANTS,
-) = range(51)
+) = range(52)
 
 # regularisation widths
 _FLOW_EPS = 1e-4  # kg/s, upwind weights and |ṁ| in pressure drops
@@ -220,6 +224,7 @@ def build_constants(unit: Unit, theta: np.ndarray, controller: bool | None = Non
     c[C_FLOW_IN] = flow_in
     c[C_CAP_COND] = air_capacity_rate(flow_out, air.density, air.specific_heat) / n
     c[C_CAP_EVAP] = air_capacity_rate(flow_in, air.density, air.specific_heat) / n
+    c[C_CP_AIR] = air.specific_heat
     c[C_P_FAN_OUT] = power_out
     c[C_P_FAN_IN] = power_in
     comp = unit.compressor
@@ -284,7 +289,8 @@ def _cell_row(y, n, i, tables, props):
 def evaluate(y, u, c, tables, dydt, out):
     """Right-hand side and outputs at state ``y`` under inputs ``u``.
 
-    ``u`` = (valve opening, compressor speed Hz, T_ambient K, T_indoor K). Writes dy/dt into
+    ``u`` = (valve opening, compressor speed Hz, T_ambient K, T_indoor K, indoor relative
+    humidity). Writes dy/dt into
     ``dydt`` and the nine outputs then the diagnostics into ``out`` (length :data:`N_EVAL`).
     Returns False when a property evaluation left the tables (outputs then hold NaN).
     """
@@ -298,7 +304,7 @@ def evaluate(y, u, c, tables, dydt, out):
 def balances(y, u, c, tables, props, dydt, out):
     """:func:`evaluate` given the cell properties ``props`` of :func:`cell_properties`."""
     n = (y.size - 6) // 4
-    opening, speed, T_amb, T_ind = u[0], u[1], u[2], u[3]
+    opening, speed, T_amb, T_ind, rh_ind = u[0], u[1], u[2], u[3], u[4]
     i_pe = 2 * n + 2
     p_c = y[0]
     p_e = y[i_pe]
@@ -411,6 +417,9 @@ def balances(y, u, c, tables, props, dydt, out):
     src_e = np.zeros(ne)
     q_cond = 0.0
     q_evap = 0.0
+    q_sensible = 0.0
+    q_latent = 0.0
+    W_ind = humidity_ratio(T_ind, rh_ind)
     flow_c = abs(m_comp) / c[C_MNOM_COND]
     flow_e = abs(m_valve) / c[C_MNOM_EVAP]
     sat_c = saturation_state(tables, p_c)
@@ -430,6 +439,11 @@ def balances(y, u, c, tables, props, dydt, out):
         alpha = cell_mean_htc(x_in, x_e[i], c[C_HTC_EL], c[C_HTC_ETP], c[C_HTC_EV], flow_e)
         q_ref = wall_heat(alpha, c[C_AR_EVAP], tw, T_e[i])
         q_air = air_side_heat(cap_e, T_air_e, tw, c[C_HTC_EA], c[C_AA_EVAP])
+        q_sensible += q_air
+        if rh_ind > 0.0:
+            q_wet = latent_heat(cap_e, c[C_CP_AIR], W_ind, tw, c[C_HTC_EA], c[C_AA_EVAP])
+            q_latent += q_wet
+            q_air += q_wet
         dydt[3 * n + 5 + i] = (q_air - q_ref) / c[C_CW_EVAP]
         src_e[i] = q_ref
         q_evap += q_ref
@@ -480,6 +494,8 @@ def balances(y, u, c, tables, props, dydt, out):
     out[22] = dp_cond
     out[23] = dp_evap
     out[24] = dp_vap
+    out[25] = q_latent
+    out[26] = q_sensible / (q_sensible + q_latent)
     return bool(np.isfinite(dydt).all())
 
 

@@ -113,7 +113,9 @@ def check_draw(unit: Unit, theta: Mapping[str, float], duration: float = 1200.0)
     run = simulate(unit, theta, rated_inputs(unit, duration), diagnostics=True)
     if run.attrs["status"] != "ok":
         nan = float("nan")
-        return DrawReport(dict(theta), "failed", run.attrs["failure_reason"], False, False, False, nan, nan)
+        return DrawReport(
+            dict(theta), "failed", run.attrs["failure_reason"], False, False, False, nan, nan
+        )
     tolerance = 1e-9 * run["W_comp"].values
     first_law = bool(np.all(run["W_ref"].values <= run["W_comp"].values + tolerance))
     second_law = bool(np.all(run["W_ref"].values >= run["W_is"].values - tolerance))

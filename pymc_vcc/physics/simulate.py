@@ -33,6 +33,7 @@ from pymc_vcc.physics.cycle import (
     state_slices,
 )
 from pymc_vcc.physics.inputs import (
+    CYCLE_INPUT_IDS,
     INPUT_IDS,
     builtin_inputs,
     input_segments,
@@ -144,7 +145,7 @@ def simulate(
     atol = _tolerances(unit)
 
     states = np.full((times.size, n_states(n)), np.nan)
-    controls = np.empty((times.size, len(INPUT_IDS)))
+    controls = np.empty((times.size, len(CYCLE_INPUT_IDS)))
     segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
     controls[:] = held[segment_of]
     stats = {"n_rhs": 0, "n_jac": 0, "n_steps": 0, "bad_rhs": 0}
@@ -378,8 +379,8 @@ def operating_point(
     """The (near) steady state reached after ``duration`` s at constant inputs.
 
     ``conditions`` override the unit's rating point (``valve_opening``, ``compressor_speed``,
-    ``T_ambient``, ``T_indoor``, SI). Returns the nine outputs and the diagnostics at the end,
-    plus ``superheat`` (K, at the suction), ``subcooling`` (K, condenser outlet), ``capacity``
+    ``T_ambient``, ``T_indoor``, SI; optional ``RH_indoor``, default dry). Returns the nine
+    outputs and the diagnostics at the end, plus ``superheat`` (K, at the suction), ``subcooling`` (K, condenser outlet), ``capacity``
     (W, evaporator heat), ``COP`` (capacity over compressor and fan power),
     ``energy_balance_error`` ((Q_cond - Q_evap - W_ref) / Q_cond), ``drift`` (largest relative
     change of an output over the last 100 s) and the run's ``status``/``failure_reason``.
@@ -388,9 +389,9 @@ def operating_point(
     from pymc_vcc.physics.refrigerant import saturation_state
 
     unit = _builtin_unit() if unit is None else unit
-    unknown = sorted(set(conditions) - set(INPUT_IDS))
+    unknown = sorted(set(conditions) - set(CYCLE_INPUT_IDS))
     if unknown:
-        raise ValueError(f"unknown condition(s) {unknown}; allowed are {list(INPUT_IDS)}")
+        raise ValueError(f"unknown condition(s) {unknown}; allowed are {list(CYCLE_INPUT_IDS)}")
     point = {name: getattr(unit.rating, name) for name in INPUT_IDS} | conditions
     result = simulate(
         unit,

@@ -50,9 +50,7 @@ def compressor_mass_flow(
 
 
 @njit(cache=True, error_model="numpy")
-def electrical_power(
-    isentropic_work: float, isentropic_efficiency: float, cf_pow: float
-) -> float:
+def electrical_power(isentropic_work: float, isentropic_efficiency: float, cf_pow: float) -> float:
     """Electrical power, W: W_s (1 + cf (1/η_s - 1)), the losses above W_s scaled by ``cf_pow``
     (η_s is the nominal overall isentropic efficiency)."""
     return isentropic_work * (1.0 + cf_pow * (1.0 / isentropic_efficiency - 1.0))
