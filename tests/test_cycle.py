@@ -19,7 +19,7 @@ from pymc_vcc.physics.cycle import (
 from pymc_vcc.physics.refrigerant import load_refrigerant
 from pymc_vcc.physics.unit import load_unit
 
-U_RATED = np.array([0.40, 55.0, 308.15, 300.15])
+U_RATED = np.array([0.40, 55.0, 308.15, 300.15, 0.0])
 
 
 @pytest.fixture(scope="module")
