@@ -86,6 +86,17 @@ DIAGNOSTIC_INFO: dict[str, tuple[str, str]] = {
 }
 """Further quantities available from :func:`evaluate` (index = 9 + position)."""
 
+INERT_PARAMETERS: tuple[str, ...] = ("FO_SPEED", "FI_SPEED")
+"""Table III parameters that change no output, by design: each fan runs at a fixed fraction of
+its rated ("nominal") speed (``speed_fraction`` in the unit file), so the fan laws give its
+flow and power from FO_FLOW/FO_POW (FI_...) alone. A separate rated speed against a fixed
+running speed would only rescale those two parameters again, which made the box span
+0.16-4.8 m³/s of outdoor air and 1.6 W-16 kW of fan power (models/README.md)."""
+
+OPTIONAL_OUTPUT_IDS: tuple[str, ...] = ("W_comp",)
+"""Diagnostics that field loggers measure and a simulator may return as outputs (the
+compressor's electrical power makes CF_POW observable)."""
+
 N_EVAL = len(OUTPUT_IDS) + len(DIAGNOSTIC_INFO)
 
 # ---- constants vector layout ---------------------------------------------------------------

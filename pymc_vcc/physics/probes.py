@@ -12,7 +12,7 @@ dozen draws):
 * :func:`parameter_effects`: the same for each Table III parameter moved to either bound.
 
 Sensor noise is stated the way instruments are specified: 0.3 K on temperatures, 0.5 % of
-reading on pressures, 1 % of reading on mass flow (:func:`noise_sd`).
+reading on pressures, 1 % of reading on mass flow and electrical power (:func:`noise_sd`).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.physics.cycle import OUTPUT_IDS, OUTPUT_INFO
+from pymc_vcc.physics.cycle import DIAGNOSTIC_INFO, OUTPUT_IDS, OUTPUT_INFO
 from pymc_vcc.physics.inputs import INPUT_IDS, builtin_inputs, constant_inputs
 from pymc_vcc.physics.simulate import simulate
 from pymc_vcc.physics.unit import Unit, load_unit
@@ -31,8 +31,8 @@ from pymc_vcc.physics.unit import Unit, load_unit
 TEMPERATURE_NOISE = 0.3
 """Standard deviation of a temperature sensor, K."""
 
-RELATIVE_NOISE = {"Pa": 0.005, "kg/s": 0.01}
-"""Standard deviation of pressure and mass-flow sensors, as a fraction of the reading."""
+RELATIVE_NOISE = {"Pa": 0.005, "kg/s": 0.01, "W": 0.01}
+"""Standard deviation of pressure, mass-flow and power sensors, as a fraction of the reading."""
 
 OSCILLATION_WINDOW = 300.0
 """Seconds at the end of a constant-input run over which PC must be still."""
@@ -46,7 +46,7 @@ MASS_LIMIT = 1e-4
 
 def noise_sd(output: str, value: np.ndarray | float) -> np.ndarray:
     """Sensor noise standard deviation of ``output`` at ``value`` (SI)."""
-    unit = OUTPUT_INFO[output][1]
+    unit = {**OUTPUT_INFO, **DIAGNOSTIC_INFO}[output][1]
     if unit == "K":
         return np.full_like(np.asarray(value, dtype=float), TEMPERATURE_NOISE)
     return RELATIVE_NOISE[unit] * np.abs(np.asarray(value, dtype=float))

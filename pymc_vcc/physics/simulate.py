@@ -22,6 +22,7 @@ from pymc_vcc.physics.cycle import (
     C_M0,
     DIAGNOSTIC_INFO,
     N_EVAL,
+    OPTIONAL_OUTPUT_IDS,
     OUTPUT_IDS,
     OUTPUT_INFO,
     build_constants,
@@ -303,9 +304,10 @@ class VCCSimulator:
 
     Parameters not in ``theta`` take their nominal values; the simulation is deterministic
     (``rng`` is accepted for the interface). Failed runs are returned flagged in attrs, never
-    raised. ``outputs`` selects output ids; ``t_window = (t_start, t_end)`` simulates up to
-    ``t_end`` and returns the outputs from ``t_start`` on. ``parameters`` names the ids a
-    sampler calibrates (default: all 26); the others stay at nominal, or at ``fixed`` values.
+    raised. ``outputs`` selects output ids (the nine, and the optional ``W_comp``);
+    ``t_window = (t_start, t_end)`` simulates up to ``t_end`` and returns the outputs from
+    ``t_start`` on. ``parameters`` names the ids a sampler calibrates (default: all 26); the
+    others stay at nominal, or at ``fixed`` values.
     """
 
     def __init__(
@@ -324,9 +326,10 @@ class VCCSimulator:
         self.inputs = builtin_inputs() if inputs is None else inputs
         validate_inputs(self.inputs)
         selected = tuple(OUTPUT_IDS if outputs is None else outputs)
-        unknown = [name for name in selected if name not in OUTPUT_IDS]
+        allowed = OUTPUT_IDS + OPTIONAL_OUTPUT_IDS
+        unknown = [name for name in selected if name not in allowed]
         if unknown or not selected:
-            raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(OUTPUT_IDS)}")
+            raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(allowed)}")
         self.output_names: tuple[str, ...] = selected
         all_ids = self.unit.parameters.ids
         self.parameter_names: tuple[str, ...] = all_ids if parameters is None else tuple(parameters)
@@ -357,6 +360,7 @@ class VCCSimulator:
             t_end=self.t_window[1],
             controller=self.controller,
             max_wall_time=self.max_wall_time,
+            diagnostics=any(name in OPTIONAL_OUTPUT_IDS for name in self.output_names),
         )
         result = result[list(self.output_names)]
         return result.sel(time=slice(self.t_window[0], None))
@@ -380,8 +384,9 @@ def operating_point(
 
     ``conditions`` override the unit's rating point (``valve_opening``, ``compressor_speed``,
     ``T_ambient``, ``T_indoor``, SI; optional ``RH_indoor``, default dry). Returns the nine
-    outputs and the diagnostics at the end, plus ``superheat`` (K, at the suction), ``subcooling`` (K, condenser outlet), ``capacity``
-    (W, evaporator heat), ``COP`` (capacity over compressor and fan power),
+    outputs and the diagnostics at the end, plus ``superheat`` (K, at the suction),
+    ``subcooling`` (K, condenser outlet), ``capacity`` (W, evaporator heat), ``COP`` (capacity
+    over compressor and fan power),
     ``energy_balance_error`` ((Q_cond - Q_evap - W_ref) / Q_cond), ``drift`` (largest relative
     change of an output over the last 100 s) and the run's ``status``/``failure_reason``.
     """
