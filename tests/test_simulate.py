@@ -155,7 +155,7 @@ def test_electrical_power_is_an_optional_output(unit):
     result = simulator({"CF_POW": 1.5}, None)
     assert list(result.data_vars) == ["TD", "W_comp"] and result.W_comp.attrs["units"] == "W"
     nominal = simulator({}, None)
-    assert float(result.W_comp[-1]) > 1.2 * float(nominal.W_comp[-1])
+    assert float(result.W_comp[-1]) > 1.1 * float(nominal.W_comp[-1])  # losses x 1.5: +14 %
 
 
 def test_humid_indoor_air_dehumidifies(unit, rated):
