@@ -160,7 +160,7 @@ _FLOW_EPS = 1e-4  # kg/s, upwind weights and |ṁ| in pressure drops
 _SRC_EPS = 1e-5  # kg/s, sign of the charge-controller source
 _DP_REG = 2e4  # Pa, valve square root
 _TANK_WIDTH = 2e3  # J/kg, tank outlet smooth max
-_DP_ITERATIONS = 3  # fixed-point passes for the flow through the lumped pressure drops
+_DP_ITERATIONS = 4  # secant steps for the flow through the lumped pressure drops
 
 
 def n_states(n_volumes: int) -> int:
@@ -312,6 +312,42 @@ def evaluate(y, u, c, tables, dydt, out):
 
 
 @njit(cache=True, error_model="numpy")
+def _drops(flow, p_c, p_e, rho_out, rho_friction_c, rho_friction_e, c):
+    """(p_s, p_d, Δp_cond, Δp_evap, Δp_vap), Pa, when ``flow`` (kg/s) passes the lumped drops:
+    condenser before the condensing pressure, evaporator and vapour line after the evaporating
+    one."""
+    dp_cond = pressure_drop(c[C_K_COND], flow, rho_friction_c, _FLOW_EPS)
+    dp_evap = pressure_drop(c[C_K_EVAP], flow, rho_friction_e, _FLOW_EPS)
+    dp_vap = pressure_drop(c[C_K_VAP], flow, rho_out, _FLOW_EPS)
+    return p_e - dp_evap - dp_vap, p_c + dp_cond, dp_cond, dp_evap, dp_vap
+
+
+@njit(cache=True, error_model="numpy")
+def _flow_through_drops(p_c, p_e, rho_out, drho_dp_out, rho_friction_c, rho_friction_e, speed, c):
+    """The compressor flow that, passing the lumped drops, sets the suction and discharge
+    pressures that give that flow, kg/s: the secant method on g(ṁ) - ṁ from ṁ = 0, with g the
+    compressor's flow at the pressures ṁ causes (g decreases with ṁ, so the root is unique).
+    The suction density is ρ at the tank outlet, linear in the drop (second-order error)."""
+
+    def compressor_flow(flow):
+        p_s, p_d = _drops(flow, p_c, p_e, rho_out, rho_friction_c, rho_friction_e, c)[:2]
+        eta = volumetric_efficiency(p_d / p_s, c[C_CLEARANCE], c[C_EXPONENT], c[C_CF_VOL])
+        rho_s = rho_out + drho_dp_out * (p_s - p_e)
+        return compressor_mass_flow(rho_s, speed, c[C_DISPLACEMENT], eta)
+
+    m_a = 0.0
+    r_a = compressor_flow(m_a)
+    m_b = r_a
+    r_b = compressor_flow(m_b) - m_b
+    for _ in range(_DP_ITERATIONS):
+        if m_b == m_a or r_b == r_a:
+            break
+        m_a, r_a, m_b = m_b, r_b, m_b - r_b * (m_b - m_a) / (r_b - r_a)
+        r_b = compressor_flow(m_b) - m_b
+    return m_b
+
+
+@njit(cache=True, error_model="numpy")
 def balances(y, u, c, tables, props, dydt, out):
     """:func:`evaluate` given the cell properties ``props`` of :func:`cell_properties`."""
     n = (y.size - 6) // 4
@@ -372,20 +408,16 @@ def balances(y, u, c, tables, props, dydt, out):
     h_suc = tank_outlet_enthalpy(
         h_ze[n + 1], sat_e[1], sat_e[2], level, c[C_BLEED_FULL], _TANK_WIDTH
     )
-    rho_out = state(tables, p_e, h_suc)[1]
+    outlet = state(tables, p_e, h_suc)
+    rho_out = outlet[1]
     speed = speed * protection_speed_factor(p_c, c[C_P_PROT_START], c[C_P_PROT_STOP])
-    p_s, p_d, rho_s = p_e, p_c, rho_out
-    dp_cond = dp_evap = dp_vap = 0.0
-    for _ in range(_DP_ITERATIONS):  # fixed-point on ṁ(p_s, p_d); contracts by ~0.05 a pass
-        eta = volumetric_efficiency(p_d / p_s, c[C_CLEARANCE], c[C_EXPONENT], c[C_CF_VOL])
-        m_flow = compressor_mass_flow(rho_s, speed, c[C_DISPLACEMENT], eta)
-        dp_cond = pressure_drop(c[C_K_COND], m_flow, rho_friction_c, _FLOW_EPS)
-        dp_evap = pressure_drop(c[C_K_EVAP], m_flow, rho_friction_e, _FLOW_EPS)
-        dp_vap = pressure_drop(c[C_K_VAP], m_flow, rho_out, _FLOW_EPS)
-        p_s = p_e - dp_evap - dp_vap
-        p_d = p_c + dp_cond
-        rho_s = state(tables, p_s, h_suc)[1]
-    T_s = state(tables, p_s, h_suc)[0]
+    flow = _flow_through_drops(
+        p_c, p_e, rho_out, outlet[2], rho_friction_c, rho_friction_e, speed, c
+    )
+    p_s, p_d, dp_cond, dp_evap, dp_vap = _drops(
+        flow, p_c, p_e, rho_out, rho_friction_c, rho_friction_e, c
+    )
+    T_s, rho_s = state(tables, p_s, h_suc)[:2]
     m_comp, h_d, w_comp, w_ref, w_is, q_comp_amb = compressor(
         tables,
         p_s,
