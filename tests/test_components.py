@@ -21,7 +21,7 @@ from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
 from pymc_vcc.physics.components.heat_transfer import (
     LIQUID_BLEND,
     air_side_heat,
-    cell_mean_htc,
+    cell_heat,
     refrigerant_htc,
 )
 from pymc_vcc.physics.components.moist_air import (
@@ -219,15 +219,19 @@ def test_liquid_level_by_the_lever_rule(tables):
     assert liquid_level(half, rho_l, rho_v) == pytest.approx(0.5, abs=1e-5)
 
 
-def test_cell_mean_htc():
-    args = (300.0, 3000.0, 800.0, 1.0)
-    # a cell all in one phase sees that phase's coefficient
-    assert cell_mean_htc(0.5, 0.6, *args) == pytest.approx(3000.0, rel=2e-3)
-    assert cell_mean_htc(1.2, 1.1, *args) == pytest.approx(800.0, rel=2e-3)
-    # a cell that holds the dew point sees a mix, whichever way its state lies
-    mixed = cell_mean_htc(1.2, 0.7, *args)
-    assert 800.0 < mixed < 3000.0
-    assert cell_mean_htc(0.7, 1.2, *args) == pytest.approx(mixed)
+def test_cell_heat_averages_flux_over_the_cell():
+    htcs = (300.0, 3000.0, 800.0, 1.0)
+    # a cell all in one phase at one temperature: α A (T_w - T)
+    assert cell_heat(310.0, 2.0, 0.5, 0.6, 300.0, 300.0, 300.0, *htcs) == pytest.approx(
+        3000.0 * 2.0 * 10.0, rel=2e-3
+    )
+    assert cell_heat(300.0, 2.0, 0.5, 0.6, 300.0, 300.0, 300.0, *htcs) == 0.0  # no driving ΔT
+    # a cell that holds the dew point sees a mix of the vapour and two-phase fluxes
+    mixed = cell_heat(300.0, 1.0, 1.2, 0.7, 330.0, 315.0, 310.0, *htcs)
+    assert -3000.0 * 20.0 < mixed < -800.0 * 10.0
+    # Simpson's rule by hand
+    by_hand = (800.0 * -30.0 + 4 * refrigerant_htc(0.95, *htcs) * -15.0 + 3000.0 * -10.0) / 6.0
+    assert mixed == pytest.approx(by_hand, rel=2e-3)
 
 
 def test_soft_cap():

@@ -39,7 +39,7 @@ from pymc_vcc.physics.components.fan import (
     fan_operating_point,
 )
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
-from pymc_vcc.physics.components.heat_transfer import air_side_heat, cell_mean_htc, wall_heat
+from pymc_vcc.physics.components.heat_transfer import air_side_heat, cell_heat
 from pymc_vcc.physics.components.moist_air import humidity_ratio, latent_heat
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
@@ -468,19 +468,49 @@ def balances(y, u, c, tables, props, dydt, out):
     sat_c = saturation_state(tables, p_c)
     x_in_c = (h_d - sat_c[1]) / (sat_c[2] - sat_c[1])  # qualities entering each coil
     x_in_e = (h_zc[n] - sat_e[1]) / (sat_e[2] - sat_e[1])
+    T_in_c = state(tables, p_c, h_d)[0]
+    T_in_e = state(tables, p_e, h_zc[n])[0]
     for i in range(n):
         tw = y[n + 2 + i]
-        x_in = x_in_c if i == 0 else x_c[i - 1]
-        alpha = cell_mean_htc(x_in, x_c[i], c[C_HTC_CL], c[C_HTC_CTP], c[C_HTC_CV], flow_c)
-        q_ref = wall_heat(alpha, c[C_AR_COND], tw, T_c[i])
+        x_in, T_in, h_in = (
+            (x_in_c, T_in_c, h_d) if i == 0 else (x_c[i - 1], T_c[i - 1], h_zc[i - 1])
+        )
+        T_mid = state(tables, p_c, 0.5 * (h_in + h_zc[i]))[0]
+        q_ref = cell_heat(
+            tw,
+            c[C_AR_COND],
+            x_in,
+            x_c[i],
+            T_in,
+            T_mid,
+            T_c[i],
+            c[C_HTC_CL],
+            c[C_HTC_CTP],
+            c[C_HTC_CV],
+            flow_c,
+        )
         q_air = air_side_heat(cap_c, T_air_c, tw, c[C_HTC_CA], c[C_AA_COND])
         dydt[n + 2 + i] = (q_air - q_ref) / c[C_CW_COND]
         src_c[i] = q_ref
         q_cond -= q_ref
         tw = y[3 * n + 5 + i]
-        x_in = x_in_e if i == 0 else x_e[i - 1]
-        alpha = cell_mean_htc(x_in, x_e[i], c[C_HTC_EL], c[C_HTC_ETP], c[C_HTC_EV], flow_e)
-        q_ref = wall_heat(alpha, c[C_AR_EVAP], tw, T_e[i])
+        x_in, T_in, h_in = (
+            (x_in_e, T_in_e, h_zc[n]) if i == 0 else (x_e[i - 1], T_e[i - 1], h_ze[i - 1])
+        )
+        T_mid = state(tables, p_e, 0.5 * (h_in + h_ze[i]))[0]
+        q_ref = cell_heat(
+            tw,
+            c[C_AR_EVAP],
+            x_in,
+            x_e[i],
+            T_in,
+            T_mid,
+            T_e[i],
+            c[C_HTC_EL],
+            c[C_HTC_ETP],
+            c[C_HTC_EV],
+            flow_e,
+        )
         q_air = air_side_heat(cap_e, T_air_e, tw, c[C_HTC_EA], c[C_AA_EVAP])
         q_sensible += q_air
         if rh_ind > 0.0:
