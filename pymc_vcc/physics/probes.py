@@ -43,6 +43,10 @@ OSCILLATION_LIMIT = 1e-3
 MASS_LIMIT = 1e-4
 """Largest relative deviation of the total refrigerant mass from M0."""
 
+PROBE_WALL_TIME = 600.0
+"""Wall-clock limit (s) of the observability runs: they measure physics, not speed, and may
+share a busy machine (the box probe keeps the unit's own limit, which samplers face)."""
+
 
 def noise_sd(output: str, value: np.ndarray | float) -> np.ndarray:
     """Sensor noise standard deviation of ``output`` at ``value`` (SI)."""
@@ -162,7 +166,8 @@ def charge_observability(
     inputs = rated_inputs(unit, 2000.0) if steady else inputs
     runs = []
     for charge in charges:
-        run = simulate(unit, {**(fixed or {}), "M0": float(charge)}, inputs)
+        theta = {**(fixed or {}), "M0": float(charge)}
+        run = simulate(unit, theta, inputs, max_wall_time=PROBE_WALL_TIME)
         if run.attrs["status"] != "ok":
             raise RuntimeError(f"M0 = {charge} kg failed: {run.attrs['failure_reason']}")
         runs.append(run.sel(time=slice(1500.0, None)) if steady else run)
@@ -187,7 +192,7 @@ def parameter_effects(
     inputs = rated_inputs(unit, 2000.0) if steady else inputs
 
     def run(theta: Mapping[str, float]) -> xr.Dataset:
-        result = simulate(unit, theta, inputs)
+        result = simulate(unit, theta, inputs, max_wall_time=PROBE_WALL_TIME)
         return result.sel(time=slice(1500.0, None)) if steady else result
 
     nominal = run({})
