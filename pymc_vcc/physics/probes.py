@@ -24,7 +24,7 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.physics.cycle import DIAGNOSTIC_INFO, OUTPUT_IDS, OUTPUT_INFO
-from pymc_vcc.physics.inputs import INPUT_IDS, builtin_inputs, constant_inputs
+from pymc_vcc.physics.inputs import INPUT_IDS, constant_inputs
 from pymc_vcc.physics.simulate import simulate
 from pymc_vcc.physics.unit import Unit, load_unit
 
@@ -215,7 +215,6 @@ __all__ = [
     "DrawReport",
     "air_ranges",
     "box_probe",
-    "builtin_inputs",
     "charge_observability",
     "check_draw",
     "noise_sd",
