@@ -9,18 +9,36 @@ from pymc_vcc.physics.components.compressor import (
     COMPRESSOR_RECORD,
     compressor,
     compressor_mass_flow,
+    electrical_power,
+    loss_share_to_refrigerant,
     protection_speed_factor,
-    shaft_power,
+    shell_loss,
     volumetric_efficiency,
 )
 from pymc_vcc.physics.components.density import QUALITY_BAND, cell_state
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature, fan_operating_point
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
-from pymc_vcc.physics.components.heat_transfer import LIQUID_BLEND, air_side_heat, refrigerant_htc
+from pymc_vcc.physics.components.heat_transfer import (
+    LIQUID_BLEND,
+    air_side_heat,
+    cell_heat,
+    refrigerant_htc,
+)
+from pymc_vcc.physics.components.moist_air import (
+    humidity_ratio,
+    latent_heat,
+    saturation_pressure_water,
+)
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
-from pymc_vcc.physics.components.smooth import signed_sqrt, smooth_max, smooth_pos, smooth_step
-from pymc_vcc.physics.components.suction_tank import tank_outlet_enthalpy
+from pymc_vcc.physics.components.smooth import (
+    signed_sqrt,
+    smooth_max,
+    smooth_pos,
+    smooth_step,
+    soft_cap,
+)
+from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
 from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import (
     entropy,
@@ -84,12 +102,21 @@ def test_valve_by_hand_and_in_series_with_the_line():
 
 def test_compressor_pieces_by_hand():
     assert volumetric_efficiency(1.0, 0.04, 1.1, 1.0) == pytest.approx(1.0, abs=1e-4)
-    assert volumetric_efficiency(3.0, 0.04, 1.1, 1.2) == pytest.approx(
-        1.2 * (1 - 0.04 * (3.0 ** (1 / 1.1) - 1)), rel=1e-4
-    )
+    loss = 0.04 * (3.0 ** (1 / 1.1) - 1)
+    assert volumetric_efficiency(3.0, 0.04, 1.1, 1.2) == pytest.approx(1 - 1.2 * loss, rel=1e-4)
+    # CF_VOL scales the losses: never above 1 at the top of its range, floored at 0.02
+    assert volumetric_efficiency(3.0, 0.04, 1.1, 1.5) < 1.0
+    assert 0.02 <= volumetric_efficiency(40.0, 0.04, 1.1, 1.5) < 0.03
     assert compressor_mass_flow(37.0, 55.0, 11.5e-6, 0.9) == pytest.approx(0.9 * 37 * 11.5e-6 * 55)
-    assert shaft_power(0.02, 30e3, 0.7, 1.0) == pytest.approx(0.02 * 30e3 / 0.7, rel=1e-4)
-    assert shaft_power(0.0, 30e3, 0.7, 1.0) == 0.0
+    assert electrical_power(600.0, 0.72, 1.0) == pytest.approx(600.0 / 0.72)
+    assert electrical_power(600.0, 0.72, 0.0) == 600.0  # no losses: isentropic work
+    assert electrical_power(0.0, 0.72, 1.0) == 0.0
+    assert loss_share_to_refrigerant(0.5, 1.0) == 0.5
+    assert loss_share_to_refrigerant(0.5, 3.0) == pytest.approx(0.75)  # odds 1 -> 3
+    assert 0.0 < loss_share_to_refrigerant(0.9, 0.3) < loss_share_to_refrigerant(0.9, 1.5) < 1.0
+    assert shell_loss(2.0, 1.0, 300.0, 350.0, 100.0) == pytest.approx(0.0, abs=0.02)
+    assert shell_loss(2.0, 1.0, 350.0, 300.0, 1e6) == pytest.approx(100.0, rel=1e-4)
+    assert shell_loss(2.0, 1.5, 400.0, 300.0, 50.0) < 50.0  # capped by the heat in the gas
 
 
 def _compressor(**changes):
@@ -99,8 +126,8 @@ def _compressor(**changes):
         "clearance": 0.04,
         "exponent": 1.1,
         "isentropic_efficiency": 0.72,
-        "refrigerant_fraction": 0.92,
-        "shell_ua": 4.0,
+        "loss_share": 0.5,
+        "shell_ua": 2.0,
         "cf_vol": 1.0,
         "cf_pow": 1.0,
         "cf_pref": 1.0,
@@ -112,25 +139,55 @@ def _compressor(**changes):
     return make_record(COMPRESSOR_RECORD, values | changes)
 
 
-def test_compressor_energy_balance(tables):
-    p_s, p_d = 9.5e5, 27.5e5
-    h_s = 4.30e5
+def _compress(tables, cf_vol, cf_pow, cf_pref, cf_shell, t_max=430.0):
+    p_s, p_d, h_s = 9.5e5, 27.5e5, 4.30e5
     rho_s = state(tables, p_s, h_s)[1]
-    # no shell loss, all power to the refrigerant: h_d = h_s + Δh_s / η_s
-    adiabatic = _compressor(refrigerant_fraction=1.0, cf_shell=0.0)
-    m, h_d, power, net = compressor(tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, adiabatic)
-    h_is = h_from_ps(tables, p_d, entropy(tables, p_s, h_s))
-    assert h_d - h_s == pytest.approx((h_is - h_s) / 0.72, rel=1e-3)
-    assert net == pytest.approx(power, rel=1e-3)  # the smooth thermal cap costs < 0.1 %
+    params = _compressor(
+        cf_vol=cf_vol, cf_pow=cf_pow, cf_pref=cf_pref, cf_shell=cf_shell, T_discharge_max=t_max
+    )
+    return h_s, compressor(tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, params)
+
+
+def test_compressor_by_hand(tables):
+    h_s, (m, h_d, power, net, w_is, ambient) = _compress(tables, 1.0, 1.0, 1.0, 0.0)
+    h_is = h_from_ps(tables, 27.5e5, entropy(tables, 9.5e5, h_s))
+    assert w_is == pytest.approx(m * (h_is - h_s), rel=1e-5)  # Δh_s smoothly floored at 0
+    assert power == pytest.approx(w_is / 0.72, rel=1e-9)
+    # no shell loss: half the losses heat the gas, the other half leave to the ambient
+    assert net == pytest.approx(w_is + 0.5 * (power - w_is), rel=1e-3)
+    assert net + ambient == pytest.approx(power, rel=1e-12)
+    assert m * (h_d - h_s) == pytest.approx(net, rel=1e-12)
     assert 0.015 < m < 0.025
-    # shell loss removes heat: discharge enthalpy lower, balance closes
-    m, h_d2, power2, net2 = compressor(tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, _compressor())
-    assert h_d2 < h_d and net2 < 0.92 * power2
-    assert m * (h_d2 - h_s) == pytest.approx(net2, rel=1e-9)
-    # the thermal limit caps the discharge temperature
-    hot = _compressor(cf_pow=2.0, cf_pref=1.5, cf_shell=0.3, T_discharge_max=340.0)
-    m, h_d3, _, _ = compressor(tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, hot)
-    assert state(tables, p_d, h_d3)[0] < 340.0 < state(tables, p_d, h_d)[0]
+
+
+@pytest.mark.parametrize("cf_vol", [0.5, 1.5])
+@pytest.mark.parametrize("cf_pow", [0.3, 1.0, 2.0])
+@pytest.mark.parametrize("cf_pref", [0.3, 1.5])
+@pytest.mark.parametrize("cf_shell", [0.3, 1.5])
+def test_compressor_laws_at_the_corners_of_the_box(tables, cf_vol, cf_pow, cf_pref, cf_shell):
+    h_s, (_, h_d, power, net, w_is, ambient) = _compress(tables, cf_vol, cf_pow, cf_pref, cf_shell)
+    h_is = h_from_ps(tables, 27.5e5, entropy(tables, 9.5e5, h_s))
+    assert net <= power  # first law: no more to the refrigerant than the drive takes
+    assert h_d >= h_is  # second law: discharge never below the isentropic state
+    assert ambient >= 0.0  # shell and drive losses leave, never enter
+    assert power >= w_is
+
+
+def test_cf_pow_and_cf_pref_have_distinct_signatures(tables):
+    _, base = _compress(tables, 1.0, 1.0, 1.0, 1.0)
+    _, more_power = _compress(tables, 1.0, 1.3, 1.0, 1.0)
+    _, more_to_gas = _compress(tables, 1.0, 1.0, 1.3, 1.0)
+    assert more_power[1] > base[1] and more_to_gas[1] > base[1]  # both heat the discharge
+    assert more_power[2] > base[2]  # only CF_POW draws more electrical power
+    assert more_to_gas[2] == pytest.approx(base[2], rel=1e-12)
+
+
+def test_compressor_thermal_limit_keeps_the_second_law(tables):
+    h_s, (_, h_free, *_) = _compress(tables, 1.0, 2.0, 1.5, 0.3)
+    _, (_, h_capped, *_) = _compress(tables, 1.0, 2.0, 1.5, 0.3, t_max=350.0)
+    h_is = h_from_ps(tables, 27.5e5, entropy(tables, 9.5e5, h_s))
+    assert state(tables, 27.5e5, h_capped)[0] < 351.0 < state(tables, 27.5e5, h_free)[0]
+    assert h_capped >= h_is
 
 
 def test_protection_speed_factor():
@@ -160,10 +217,64 @@ def test_air_side_heat_limits():
 
 
 def test_tank_outlet(tables):
-    h_v = saturation_state(tables, 1e6)[2]
-    # smooth max: off by width²/(4 distance) = 33 J/kg at 30 kJ/kg from the dew line
-    assert tank_outlet_enthalpy(h_v + 30e3, h_v, 2e3) == pytest.approx(h_v + 30e3, abs=40.0)
-    assert tank_outlet_enthalpy(h_v - 100e3, h_v, 2e3) == pytest.approx(h_v, abs=20.0)
+    _, h_l, h_v, _, _ = saturation_state(tables, 1e6)
+    # superheated content leaves as it is (smooth max: off by width²/(4 distance) = 33 J/kg)
+    assert tank_outlet_enthalpy(h_v + 30e3, h_l, h_v, 0.0, 0.3, 2e3) == pytest.approx(
+        h_v + 30e3, abs=40.0
+    )
+    # a dry tank delivers saturated vapour; the bleed wets the outflow with the level
+    assert tank_outlet_enthalpy(h_v - 1e3, h_l, h_v, 0.0, 0.3, 2e3) == pytest.approx(h_v, abs=1e3)
+    wet = tank_outlet_enthalpy(h_l + 0.2 * (h_v - h_l), h_l, h_v, 0.5, 0.3, 2e3)
+    assert wet == pytest.approx(h_v - 0.15 * (h_v - h_l), abs=20.0)
+    levels = [0.0, 0.1, 0.2, 0.4]
+    outlets = [tank_outlet_enthalpy(h_l, h_l, h_v, lv, 0.3, 2e3) for lv in levels]
+    assert np.all(np.diff(outlets) < 0)  # more liquid, wetter suction
+
+
+def test_liquid_level_by_the_lever_rule(tables):
+    _, _, _, rho_l, rho_v = saturation_state(tables, 1e6)
+    assert liquid_level(rho_l, rho_l, rho_v) == pytest.approx(1.0, abs=1e-3)
+    assert liquid_level(rho_v, rho_l, rho_v) == pytest.approx(0.0, abs=1e-3)
+    assert liquid_level(0.8 * rho_v, rho_l, rho_v) == pytest.approx(0.0, abs=1e-4)  # superheated
+    half = 0.5 * (rho_l + rho_v)
+    assert liquid_level(half, rho_l, rho_v) == pytest.approx(0.5, abs=1e-5)
+
+
+def test_cell_heat_averages_flux_over_the_cell():
+    htcs = (300.0, 3000.0, 800.0, 1.0)
+    # a cell all in one phase at one temperature: α A (T_w - T)
+    assert cell_heat(310.0, 2.0, 0.5, 0.6, 300.0, 300.0, 300.0, *htcs) == pytest.approx(
+        3000.0 * 2.0 * 10.0, rel=2e-3
+    )
+    assert cell_heat(300.0, 2.0, 0.5, 0.6, 300.0, 300.0, 300.0, *htcs) == 0.0  # no driving ΔT
+    # a cell that holds the dew point sees a mix of the vapour and two-phase fluxes
+    mixed = cell_heat(300.0, 1.0, 1.2, 0.7, 330.0, 315.0, 310.0, *htcs)
+    assert -3000.0 * 20.0 < mixed < -800.0 * 10.0
+    # Simpson's rule by hand
+    by_hand = (800.0 * -30.0 + 4 * refrigerant_htc(0.95, *htcs) * -15.0 + 3000.0 * -10.0) / 6.0
+    assert mixed == pytest.approx(by_hand, rel=2e-3)
+
+
+def test_soft_cap():
+    assert soft_cap(0.0, 1.0) == 0.0
+    assert soft_cap(0.3, 1.0) == pytest.approx(0.3, rel=0.003)
+    assert soft_cap(100.0, 1.0) == pytest.approx(1.0, rel=1e-6)
+    xs = np.linspace(0.0, 5.0, 101)
+    capped = np.array([soft_cap(x, 1.0) for x in xs])
+    assert np.all(capped <= np.minimum(xs, 1.0) + 1e-15) and np.all(np.diff(capped) > 0)
+
+
+def test_moist_air_by_hand():
+    # 27 degC, 50 % RH: humidity ratio 0.0112 kg/kg (ASHRAE psychrometric chart)
+    assert humidity_ratio(300.15, 0.5) == pytest.approx(0.0112, abs=1e-4)
+    assert saturation_pressure_water(293.15) == pytest.approx(2339.2, rel=0.004)  # steam tables
+    assert humidity_ratio(300.15, 0.0) == 0.0
+    # a wall above the dew point (15.7 degC here) stays dry; below it, latent heat flows
+    assert latent_heat(200.0, 1006.0, 0.0112, 293.15, 60.0, 1.0) == pytest.approx(0.0, abs=0.01)
+    wet = latent_heat(200.0, 1006.0, 0.0112, 283.15, 60.0, 1.0)
+    W_wall = humidity_ratio(283.15, 1.0)
+    effectiveness = 1 - math.exp(-60.0 / 200.0)
+    assert wet == pytest.approx(200.0 / 1006.0 * 2.45e6 * (0.0112 - W_wall) * effectiveness, 0.01)
 
 
 def _zone(tables, p, hs):

@@ -8,10 +8,10 @@ from pymc_vcc.physics.cycles.base import Block, BlockKind, StateLayout
 from pymc_vcc.physics.refrigerant import load_refrigerant
 from pymc_vcc.physics.unit import HEAT_PUMP_UNIT, load_unit
 
-# (unit file, inputs at which each is checked): valve, speed Hz, outdoor K, indoor K
+# (unit file, inputs at which each is checked): valve, speed Hz, outdoor K, indoor K, indoor RH
 CASES = {
-    "split-cooling": (None, np.array([0.40, 55.0, 308.15, 300.15])),
-    "heat-pump-heating": (HEAT_PUMP_UNIT, np.array([0.30, 65.0, 281.15, 293.15])),
+    "split-cooling": (None, np.array([0.40, 55.0, 308.15, 300.15, 0.0])),
+    "heat-pump-heating": (HEAT_PUMP_UNIT, np.array([0.30, 65.0, 281.15, 293.15, 0.0])),
 }
 
 

@@ -40,7 +40,8 @@ def test_segments_merge_repeated_rows():
     )
     edges, values = input_segments(inputs)
     np.testing.assert_array_equal(edges, [0.0, 20.0, 30.0])
-    assert values.shape == (2, 4) and values[1, 0] == 0.5
+    assert values.shape == (2, 5) and values[1, 0] == 0.5
+    np.testing.assert_array_equal(values[:, 4], 0.0)  # RH_indoor absent: dry air
 
 
 def test_window_cuts_and_keeps_the_held_value():
@@ -89,3 +90,14 @@ def test_dataset_validation_checks_units():
 
     with pytest.raises(ValueError, match="T_indoor must have units 'K'"):
         validate_inputs(inputs)
+
+
+def test_optional_indoor_humidity():
+    rated = {"valve_opening": 0.4, "compressor_speed": 55.0, "T_ambient": 308.15}
+    humid = constant_inputs(100.0, **rated, T_indoor=300.15, RH_indoor=0.5)
+    assert humid.RH_indoor.attrs["units"] == "1"
+    np.testing.assert_array_equal(input_segments(humid)[1][:, 4], 0.5)
+    with pytest.raises(ValueError, match=r"RH_indoor = 1.2 1 at time 0.0 s is outside"):
+        constant_inputs(100.0, **rated, T_indoor=300.15, RH_indoor=1.2)
+    with pytest.raises(ValueError, match="unknown input"):
+        constant_inputs(100.0, **rated, T_indoor=300.15, RH_outdoor=0.5)

@@ -46,6 +46,18 @@ INPUTS: tuple[InputSpec, ...] = (
 
 INPUT_IDS: tuple[str, ...] = tuple(spec.id for spec in INPUTS)
 
+OPTIONAL_INPUTS: tuple[tuple[InputSpec, float], ...] = (
+    (InputSpec("RH_indoor", "Indoor relative humidity", "1", 0.0, 1.0), 0.0),
+)
+"""Inputs a profile may carry, with the value used when it does not (RH 0: dry indoor air, as
+in the paper; with RH > 0 the indoor coil dehumidifies where it is below the dew point)."""
+
+CYCLE_INPUT_IDS: tuple[str, ...] = INPUT_IDS + tuple(spec.id for spec, _ in OPTIONAL_INPUTS)
+"""Every input the cycle reads, in order: the four required, then the optional ones."""
+
+_ALL_INPUTS = INPUTS + tuple(spec for spec, _ in OPTIONAL_INPUTS)
+_DEFAULTS = {spec.id: default for spec, default in OPTIONAL_INPUTS}
+
 _CELSIUS_OFFSET = 273.15
 
 
@@ -53,14 +65,16 @@ def make_inputs(time: ArrayLike, **values: ArrayLike) -> xr.Dataset:
     """Build and validate an input Dataset from arrays in SI units (one value per time)."""
     time = np.asarray(time, dtype=float)
     data_vars = {}
-    for spec in INPUTS:
+    for spec in _ALL_INPUTS:
         if spec.id not in values:
+            if spec.id in _DEFAULTS:
+                continue
             raise ValueError(f"input {spec.id!r} is missing; required inputs are {INPUT_IDS}")
         array = np.broadcast_to(np.asarray(values[spec.id], dtype=float), time.shape)
         data_vars[spec.id] = ("time", array.copy(), {"units": spec.unit, "long_name": spec.name})
-    unknown = sorted(set(values) - set(INPUT_IDS))
+    unknown = sorted(set(values) - set(CYCLE_INPUT_IDS))
     if unknown:
-        raise ValueError(f"unknown input(s) {unknown}; allowed inputs are {INPUT_IDS}")
+        raise ValueError(f"unknown input(s) {unknown}; allowed inputs are {CYCLE_INPUT_IDS}")
     dataset = xr.Dataset(data_vars, coords={"time": ("time", time, {"units": "s"})})
     validate_inputs(dataset)
     return dataset
@@ -91,10 +105,12 @@ def validate_inputs(inputs: xr.Dataset) -> None:
     missing = [pid for pid in INPUT_IDS if pid not in inputs.data_vars]
     if missing:
         raise ValueError(f"inputs: missing variable(s) {missing}; required are {INPUT_IDS}")
-    unknown = sorted(str(name) for name in set(inputs.data_vars) - set(INPUT_IDS))
+    unknown = sorted(str(name) for name in set(inputs.data_vars) - set(CYCLE_INPUT_IDS))
     if unknown:
-        raise ValueError(f"inputs: unknown variable(s) {unknown}; allowed are {INPUT_IDS}")
-    for spec in INPUTS:
+        raise ValueError(f"inputs: unknown variable(s) {unknown}; allowed are {CYCLE_INPUT_IDS}")
+    for spec in _ALL_INPUTS:
+        if spec.id not in inputs.data_vars:
+            continue
         variable = inputs[spec.id]
         if variable.dims != ("time",):
             raise ValueError(f"inputs: {spec.id} must have dims ('time',), got {variable.dims}")
@@ -184,23 +200,34 @@ def constant_inputs(
     compressor_speed: float,
     T_ambient: float,
     T_indoor: float,
+    **optional: float,
 ) -> xr.Dataset:
-    """A profile holding all four inputs constant for ``duration`` seconds (SI units)."""
+    """A profile holding the inputs constant for ``duration`` seconds (SI units); ``optional``
+    may set the optional inputs (``RH_indoor``)."""
     return make_inputs(
         np.array([0.0, float(duration)]),
         valve_opening=valve_opening,
         compressor_speed=compressor_speed,
         T_ambient=T_ambient,
         T_indoor=T_indoor,
+        **optional,
     )
 
 
 def input_segments(inputs: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
     """Break points and held values: ``(edges, values)`` with ``values[k]`` (ordered as
-    :data:`INPUT_IDS`) held on ``[edges[k], edges[k + 1])``; rows that repeat the previous values
-    are merged, so the solver restarts only where an input really steps."""
+    :data:`CYCLE_INPUT_IDS`, absent optional inputs at their default) held on
+    ``[edges[k], edges[k + 1])``; rows that repeat the previous values are merged, so the solver
+    restarts only where an input really steps."""
     time = np.asarray(inputs["time"].values, dtype=float)
-    table = np.column_stack([np.asarray(inputs[pid].values, dtype=float) for pid in INPUT_IDS])
+    table = np.column_stack(
+        [
+            np.asarray(inputs[pid].values, dtype=float)
+            if pid in inputs.data_vars
+            else np.full(time.size, _DEFAULTS[pid])
+            for pid in CYCLE_INPUT_IDS
+        ]
+    )
     keep = [0] + [k for k in range(1, time.size - 1) if np.any(table[k] != table[k - 1])]
     edges = np.append(time[keep], time[-1])
     return edges, table[keep]

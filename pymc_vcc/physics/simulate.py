@@ -22,6 +22,7 @@ from threadpoolctl import ThreadpoolController
 from pymc_vcc.physics.cycles.base import CycleModel
 from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.inputs import (
+    CYCLE_INPUT_IDS,
     INPUT_IDS,
     builtin_inputs,
     input_segments,
@@ -129,7 +130,7 @@ def simulate(
     atol = layout.tolerances(unit.solver)
 
     states = np.full((times.size, layout.size), np.nan)
-    controls = np.empty((times.size, len(INPUT_IDS)))
+    controls = np.empty((times.size, len(CYCLE_INPUT_IDS)))
     segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
     controls[:] = held[segment_of]
     stepper = make_solver(method, unit.solver.rtol, atol, unit.solver.max_step, limit)
@@ -227,12 +228,13 @@ class VCCSimulator:
 
     Parameters not in ``theta`` take their nominal values; the simulation is deterministic
     (``rng`` is accepted for the interface). Failed runs are returned flagged in attrs, never
-    raised. ``outputs`` selects output ids; ``t_window = (t_start, t_end)`` simulates up to
-    ``t_end`` and returns the outputs from ``t_start`` on. ``parameters`` names the ids a
-    sampler calibrates (default: all 26); the others stay at nominal, or at ``fixed`` values.
-    Samplers refuse priors reaching outside the unit's parameter bounds
-    (``parameter_bounds``) unless ``allow_outside_unit_bounds=True`` (extrapolation).
-    ``solver`` picks the ODE solver (default: the unit's ``solver.method``).
+    raised. ``outputs`` selects output ids (the cycle's outputs, and its optional ones such as
+    ``W_comp``); ``t_window = (t_start, t_end)`` simulates up to ``t_end`` and returns the
+    outputs from ``t_start`` on. ``parameters`` names the ids a sampler calibrates (default: all
+    26); the others stay at nominal, or at ``fixed`` values. Samplers refuse priors reaching
+    outside the unit's parameter bounds (``parameter_bounds``) unless
+    ``allow_outside_unit_bounds=True`` (extrapolation). ``solver`` picks the ODE solver
+    (default: the unit's ``solver.method``).
     """
 
     def __init__(
@@ -252,11 +254,13 @@ class VCCSimulator:
         self.unit = load_unit() if unit is None else unit
         self.inputs = builtin_inputs() if inputs is None else inputs
         validate_inputs(self.inputs)
-        output_ids = self.unit.cycle_model.output_ids
+        model = self.unit.cycle_model
+        output_ids = model.output_ids
         selected = tuple(output_ids if outputs is None else outputs)
-        unknown = [name for name in selected if name not in output_ids]
+        allowed = output_ids + model.optional_output_ids
+        unknown = [name for name in selected if name not in allowed]
         if unknown or not selected:
-            raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(output_ids)}")
+            raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(allowed)}")
         self.output_names: tuple[str, ...] = selected
         all_ids = self.unit.parameters.ids
         self.parameter_names: tuple[str, ...] = all_ids if parameters is None else tuple(parameters)
@@ -305,6 +309,9 @@ class VCCSimulator:
             controller=self.controller,
             max_wall_time=self.max_wall_time,
             solver=self.solver,
+            diagnostics=any(
+                name in self.unit.cycle_model.optional_output_ids for name in self.output_names
+            ),
         )
         result = result[list(self.output_names)]
         return result.sel(time=slice(self.t_window[0], None))
@@ -333,10 +340,10 @@ def operating_point(
     """The (near) steady state reached after ``duration`` s at constant inputs.
 
     ``conditions`` override the unit's rating point (``valve_opening``, ``compressor_speed``,
-    ``T_ambient``, ``T_indoor``, SI). Returns the nine outputs and the diagnostics at the end,
-    plus ``superheat`` (K, at the suction), ``subcooling`` (K, condenser outlet), ``capacity``
-    (W, the cycle's useful heat: evaporator heat cooling, condenser heat heating), ``COP``
-    (capacity over compressor and fan power),
+    ``T_ambient``, ``T_indoor``, SI; optional ``RH_indoor``, default dry). Returns the nine
+    outputs and the diagnostics at the end, plus ``superheat`` (K, at the suction),
+    ``subcooling`` (K, condenser outlet), ``capacity`` (W, the cycle's useful heat: evaporator
+    heat cooling, condenser heat heating), ``COP`` (capacity over compressor and fan power),
     ``energy_balance_error`` ((Q_cond - Q_evap - W_ref) / Q_cond), ``drift`` (largest relative
     change of an output over the last 100 s) and the run's ``status``/``failure_reason``.
     """
@@ -344,9 +351,9 @@ def operating_point(
     from pymc_vcc.physics.refrigerant import saturation_state
 
     unit = _builtin_unit() if unit is None else unit
-    unknown = sorted(set(conditions) - set(INPUT_IDS))
+    unknown = sorted(set(conditions) - set(CYCLE_INPUT_IDS))
     if unknown:
-        raise ValueError(f"unknown condition(s) {unknown}; allowed are {list(INPUT_IDS)}")
+        raise ValueError(f"unknown condition(s) {unknown}; allowed are {list(CYCLE_INPUT_IDS)}")
     point = {name: getattr(unit.rating, name) for name in INPUT_IDS} | conditions
     result = simulate(
         unit,

@@ -70,7 +70,7 @@ class CompressorGeometry:
     clearance: float  # clearance ratio of the volumetric-efficiency model, -
     polytropic_exponent: float  # re-expansion exponent, -
     isentropic_efficiency: float  # -
-    refrigerant_power_fraction: float  # share of shaft power reaching the refrigerant, -
+    loss_share_to_refrigerant: float  # share of the losses (power above W_s) heating the gas, -
     shell_ua: float  # shell heat-loss conductance to ambient, W/K
     max_discharge_temperature: float  # thermal limit of the discharge gas, K
     protection_pressure_start: float  # discharge pressure where the speed droop starts, Pa
@@ -104,16 +104,18 @@ class PipeGeometry:
 
 @dataclass(frozen=True)
 class TankGeometry:
-    """Suction accumulator."""
+    """Suction accumulator with a bleed (oil-return) hole in its J-tube."""
 
     volume: float  # m3
+    bleed_fraction_full: float  # liquid mass fraction of the outflow with a full tank, -
 
 
 @dataclass(frozen=True)
 class FanSettings:
-    """Fan running speed (same unit as the nominal speed parameter)."""
+    """Fan running speed as a fraction of its rated ("nominal") speed; the fan laws scale the
+    rated flow and power (Table III) to it."""
 
-    operating_speed: float
+    speed_fraction: float
 
 
 @dataclass(frozen=True)
@@ -136,9 +138,11 @@ class RatingPoint:
 
 @dataclass(frozen=True)
 class PressureDrop:
-    """Darcy friction factor of the lumped pressure drops (heat exchangers and lines)."""
+    """Lumped pressure drops: Darcy friction factor of straight tube, and the ratio of a coil's
+    drop to straight-tube homogeneous friction (return bends, headers, two-phase slip)."""
 
     darcy_friction_factor: float
+    coil_multiplier: float
 
 
 _SECTIONS: dict[str, type] = {
@@ -170,7 +174,8 @@ _CHOICES: dict[tuple[str, str], tuple[str, ...]] = {("solver", "method"): METHOD
 _FRACTIONS = {
     ("compressor", "clearance"),
     ("compressor", "isentropic_efficiency"),
-    ("compressor", "refrigerant_power_fraction"),
+    ("compressor", "loss_share_to_refrigerant"),
+    ("suction_tank", "bleed_fraction_full"),
 }
 
 

@@ -21,7 +21,7 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.physics.cycles import CycleModel
-from pymc_vcc.physics.inputs import INPUT_IDS
+from pymc_vcc.physics.inputs import INPUT_IDS, constant_inputs, input_segments
 from pymc_vcc.physics.unit import Unit
 
 ANNOUNCE_AFTER_SECONDS = 2.0
@@ -59,7 +59,8 @@ def _run_kernels(unit: Unit) -> None:
     tables = load_refrigerant(unit.refrigerant).tables
     model = unit.cycle_model
     n = unit.discretisation.n_volumes
-    u = np.array([getattr(unit.rating, name) for name in INPUT_IDS])
+    rating = constant_inputs(1.0, **{name: getattr(unit.rating, name) for name in INPUT_IDS})
+    u = input_segments(rating)[1][0]  # every input the cycle reads, optional ones at default
     c = model.constants(unit, unit.parameters.nominal)
     y = model.initial_state(c, n, u, tables)
     dydt = np.empty(y.size)

@@ -1,8 +1,26 @@
-"""Variable-speed compressor: volumetric efficiency, shaft power, heat to refrigerant, shell loss.
+"""Variable-speed hermetic compressor: mass flow, electrical power, heat to the refrigerant.
 
-The four Table III correction factors act here: ``cf_vol`` on the volumetric efficiency,
-``cf_pow`` on the shaft power, ``cf_pref`` on the share of it reaching the refrigerant and
-``cf_shell`` on the shell heat loss to the ambient.
+Energy flows (W), with ṁ the mass flow and Δh_s the isentropic enthalpy rise:
+
+    W_s   = ṁ Δh_s                              isentropic work
+    W     = W_s (1 + cf_pow (1/η_s - 1))        electrical power; losses L = W - W_s >= 0
+    Q_in  = W_s + φ L                           reaches the refrigerant (φ in (0, 1))
+    Q_sh  = cap(cf_shell UA (T_ad - T_amb)⁺, φ L)   shell loss, 0 <= Q_sh <= φ L
+    h_d   = h_s + (Q_in - Q_sh) / ṁ             so h_d >= h_s,is and ṁ (h_d - h_s) <= W
+
+The four Table III correction factors are mapped so that every value of their range is
+physical (first law: power to the refrigerant never above the electrical power; second law:
+discharge enthalpy never below the isentropic one; shell loss never negative):
+
+* ``cf_vol`` scales the volumetric *losses*: η_v = 1 - cf_vol (1 - η_v0), never above 1;
+* ``cf_pow`` scales the compressor's losses L (motor, drive, friction, irreversibility), so the
+  electrical power is never below the isentropic work;
+* ``cf_pref`` scales the *odds* that a watt of loss ends in the refrigerant rather than in the
+  ambient: φ/(1 - φ) = cf_pref φ₀/(1 - φ₀), so φ stays in (0, 1);
+* ``cf_shell`` scales the shell conductance UA; the loss is capped smoothly at φ L.
+
+CF_POW thus changes the electrical power (an optional output) and the discharge temperature,
+CF_PREF the discharge temperature only.
 """
 
 from __future__ import annotations
@@ -10,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from pymc_vcc.physics.components.smooth import smooth_max, smooth_min, smooth_pos, smooth_step
+from pymc_vcc.physics.components.smooth import smooth_max, smooth_pos, smooth_step, soft_cap
 from pymc_vcc.physics.refrigerant import entropy, h_from_ps, h_from_pT, state
 
 COMPRESSOR_RECORD = np.dtype(
@@ -19,7 +37,7 @@ COMPRESSOR_RECORD = np.dtype(
         ("clearance", np.float64),  # clearance ratio of the volumetric-efficiency model, -
         ("exponent", np.float64),  # polytropic re-expansion exponent, -
         ("isentropic_efficiency", np.float64),  # -
-        ("refrigerant_fraction", np.float64),  # share of shaft power reaching the refrigerant, -
+        ("loss_share", np.float64),  # nominal share φ₀ of the losses heating the refrigerant, -
         ("shell_ua", np.float64),  # shell heat-loss conductance to ambient, W/K
         ("cf_vol", np.float64),  # Table III correction factors, -
         ("cf_pow", np.float64),
@@ -37,9 +55,10 @@ COMPRESSOR_RECORD = np.dtype(
 def volumetric_efficiency(
     pressure_ratio: float, clearance: float, exponent: float, cf_vol: float
 ) -> float:
-    """cf · (1 - c (r^(1/n) - 1)), the clearance re-expansion model, smoothly floored at 0.02."""
-    nominal = 1.0 - clearance * (pressure_ratio ** (1.0 / exponent) - 1.0)
-    return cf_vol * smooth_max(nominal, 0.02, 0.01)
+    """η_v = 1 - cf (c (r^(1/n) - 1)): the clearance re-expansion loss scaled by ``cf_vol``,
+    smoothly floored at 0.02 (so η_v < 1 for every cf >= 0)."""
+    loss = clearance * (pressure_ratio ** (1.0 / exponent) - 1.0)
+    return smooth_max(1.0 - cf_vol * loss, 0.02, 0.01)
 
 
 @njit(cache=True, error_model="numpy")
@@ -51,17 +70,26 @@ def compressor_mass_flow(
 
 
 @njit(cache=True, error_model="numpy")
-def shaft_power(
-    mass_flow: float, dh_isentropic: float, isentropic_efficiency: float, cf_pow: float
-) -> float:
-    """Electric/shaft power, W: cf ṁ Δh_s / η_s (Δh_s smoothly floored at 0)."""
-    return cf_pow * mass_flow * smooth_pos(dh_isentropic, 100.0) / isentropic_efficiency
+def electrical_power(isentropic_work: float, isentropic_efficiency: float, cf_pow: float) -> float:
+    """Electrical power, W: W_s (1 + cf (1/η_s - 1)), the losses above W_s scaled by ``cf_pow``
+    (η_s is the nominal overall isentropic efficiency)."""
+    return isentropic_work * (1.0 + cf_pow * (1.0 / isentropic_efficiency - 1.0))
 
 
 @njit(cache=True, error_model="numpy")
-def shell_loss(ua: float, cf_shell: float, T_shell: float, T_ambient: float) -> float:
-    """Heat lost through the shell to the ambient, W: cf UA (T_shell - T_amb)."""
-    return cf_shell * ua * (T_shell - T_ambient)
+def loss_share_to_refrigerant(nominal_share: float, cf_pref: float) -> float:
+    """φ in (0, 1): share of the losses heating the refrigerant, odds φ₀/(1-φ₀) scaled by cf."""
+    odds = cf_pref * nominal_share / (1.0 - nominal_share)
+    return odds / (1.0 + odds)
+
+
+@njit(cache=True, error_model="numpy")
+def shell_loss(
+    ua: float, cf_shell: float, T_shell: float, T_ambient: float, available: float
+) -> float:
+    """Heat lost through the shell to the ambient, W: cf UA (T_shell - T_amb)⁺ (1 K smoothing),
+    capped smoothly at ``available`` (the loss heat in the gas), so 0 <= loss <= available."""
+    return soft_cap(cf_shell * ua * smooth_pos(T_shell - T_ambient, 1.0), available)
 
 
 @njit(cache=True, error_model="numpy")
@@ -81,28 +109,41 @@ def compressor(
     speed: float,
     T_ambient: float,
     params,
-) -> tuple[float, float, float, float]:
-    """(ṁ kg/s, discharge enthalpy J/kg, shaft power W, net power to the refrigerant W).
+) -> tuple[float, float, float, float, float, float]:
+    """(ṁ kg/s, discharge enthalpy J/kg, electrical power W, net power to the refrigerant W,
+    isentropic power W, heat to the ambient W) — see the module docstring.
 
-    Power to the refrigerant is cf_pref · fraction · shaft power, less the shell loss evaluated
-    at the temperature the gas would reach without it. The shell loss grows smoothly (over
-    2 kJ/kg) wherever the discharge would exceed ``T_discharge_max`` (K), the compressor's
-    thermal limit, so the discharge state stays inside the property tables. Non-finite (NaN)
-    results mean a property call left the tables. ``params`` is a :data:`COMPRESSOR_RECORD`.
+    ``params`` is a :data:`COMPRESSOR_RECORD`; its ``loss_share`` is φ₀, the nominal share of
+    the losses heating the refrigerant. The discharge enthalpy's excess over the isentropic one
+    is capped smoothly where the discharge would pass ``T_discharge_max`` (K), the thermal limit
+    (the excess then leaves through shell and oil), so the state stays inside the property
+    tables. NaN results mean a property call left them.
     """
     eta_vol = volumetric_efficiency(
         p_discharge / p_suction, params.clearance, params.exponent, params.cf_vol
     )
     mass_flow = compressor_mass_flow(rho_suction, speed, params.displacement, eta_vol)
     s_suction = entropy(tables, p_suction, h_suction)
-    h_isentropic = h_from_ps(tables, p_discharge, s_suction)
-    power = shaft_power(
-        mass_flow, h_isentropic - h_suction, params.isentropic_efficiency, params.cf_pow
+    dh_isentropic = smooth_pos(h_from_ps(tables, p_discharge, s_suction) - h_suction, 100.0)
+    h_isentropic = h_suction + dh_isentropic
+    work_isentropic = mass_flow * dh_isentropic
+    power = electrical_power(work_isentropic, params.isentropic_efficiency, params.cf_pow)
+    loss_in_gas = loss_share_to_refrigerant(params.loss_share, params.cf_pref) * (
+        power - work_isentropic
     )
-    to_refrigerant = params.cf_pref * params.refrigerant_fraction * power
-    h_limit = h_from_pT(tables, p_discharge, params.T_discharge_max)
-    h_adiabatic = smooth_min(h_suction + to_refrigerant / mass_flow, h_limit, 2e3)
+    headroom = smooth_pos(
+        h_from_pT(tables, p_discharge, params.T_discharge_max) - h_isentropic, 2e3
+    )
+    h_adiabatic = h_isentropic + soft_cap(loss_in_gas / mass_flow, headroom)
     T_adiabatic = state(tables, p_discharge, h_adiabatic)[0]
-    net = to_refrigerant - shell_loss(params.shell_ua, params.cf_shell, T_adiabatic, T_ambient)
-    h_discharge = smooth_min(h_suction + net / mass_flow, h_limit, 2e3)
-    return mass_flow, h_discharge, power, mass_flow * (h_discharge - h_suction)
+    shell = shell_loss(params.shell_ua, params.cf_shell, T_adiabatic, T_ambient, loss_in_gas)
+    h_discharge = h_isentropic + soft_cap((loss_in_gas - shell) / mass_flow, headroom)
+    to_refrigerant = mass_flow * (h_discharge - h_suction)
+    return (
+        mass_flow,
+        h_discharge,
+        power,
+        to_refrigerant,
+        work_isentropic,
+        power - to_refrigerant,
+    )

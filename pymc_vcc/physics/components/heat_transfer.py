@@ -52,6 +52,31 @@ def air_side_heat(
 
 
 @njit(cache=True, error_model="numpy")
-def wall_heat(htc: float, area: float, T_wall: float, T_fluid: float) -> float:
-    """Convective heat from a wall to a fluid, W."""
-    return htc * area * (T_wall - T_fluid)
+def cell_heat(
+    T_wall: float,
+    area: float,
+    quality_in: float,
+    quality_out: float,
+    T_in: float,
+    T_mid: float,
+    T_out: float,
+    htc_liquid: float,
+    htc_two_phase: float,
+    htc_vapor: float,
+    flow_ratio: float,
+) -> float:
+    """Heat from the wall to a cell's refrigerant, W: the local flux α(x) (T_w - T) averaged
+    over the cell, whose enthalpy runs linearly from its inlet to its outlet (state) value
+    (Simpson's rule on inlet, middle and outlet; ``T_mid`` at the middle enthalpy).
+
+    A cell containing the dew or bubble point so sees the length-weighted mix of the phases'
+    coefficients and temperatures, which changes as smoothly as its inlet and outlet do,
+    instead of switching as its single state crosses a blend (which excited a limit cycle at
+    N = 10).
+    """
+    middle = 0.5 * (quality_in + quality_out)
+    a_in = refrigerant_htc(quality_in, htc_liquid, htc_two_phase, htc_vapor, flow_ratio)
+    a_mid = refrigerant_htc(middle, htc_liquid, htc_two_phase, htc_vapor, flow_ratio)
+    a_out = refrigerant_htc(quality_out, htc_liquid, htc_two_phase, htc_vapor, flow_ratio)
+    flux = a_in * (T_wall - T_in) + 4.0 * a_mid * (T_wall - T_mid) + a_out * (T_wall - T_out)
+    return area * flux / 6.0

@@ -45,3 +45,11 @@ def smooth_step(t: float) -> float:
     if t >= 1.0:
         return 1.0
     return t * t * (3.0 - 2.0 * t)
+
+
+@njit(cache=True, error_model="numpy")
+def soft_cap(x: float, cap: float) -> float:
+    """A smooth min(x, cap) for x >= 0 and cap > 0: x / (1 + (x/cap)⁴)^(1/4), never above
+    either and within 1 % of x for x < 0.44 cap."""
+    r = x / cap
+    return x / (1.0 + r * r * r * r) ** 0.25

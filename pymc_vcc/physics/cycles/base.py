@@ -127,7 +127,8 @@ class CycleModel(ABC):
     """One cycle topology: its parameters, outputs, state layout and Numba kernels.
 
     Kernels (Numba dispatchers; ``c`` is the one-element record array of :meth:`constants`,
-    ``u`` the inputs ordered as :data:`~pymc_vcc.physics.inputs.INPUT_IDS`):
+    ``u`` the inputs ordered as :data:`~pymc_vcc.physics.inputs.CYCLE_INPUT_IDS`, absent optional
+    inputs at their default):
 
     * ``evaluate(y, u, c, tables, dydt, out) -> bool``: dy/dt into ``dydt``, outputs then
       diagnostics into ``out``; False when a property left the tables;
@@ -145,6 +146,8 @@ class CycleModel(ABC):
     """Long name and unit of each output, in order."""
     diagnostic_info: ClassVar[dict[str, tuple[str, str]]]
     """Further quantities after the outputs; must include ``M`` (kg) and ``mdot_src`` (kg/s)."""
+    optional_output_ids: ClassVar[tuple[str, ...]] = ()
+    """Diagnostics a simulator may also return as outputs (quantities field loggers measure)."""
     capacity: ClassVar[str]
     """The diagnostic that is the unit's useful heat, W (what its COP divides)."""
     evaluate: ClassVar[Callable[..., bool]]

@@ -9,9 +9,13 @@ Two pressure zones (N = cells per heat exchanger):
 
 Pressure drops: vapour line and condenser between the compressor discharge and the high-side
 zone (PD = PC + Δp), evaporator between the low-side zone and the suction (PS = PE - Δp),
-liquid line in series with the valve. The charge controller, compressor, valve, tank, coils
-and fans are those of :mod:`.split_cooling`, with the indoor fan over the condenser and the
-outdoor fan over the evaporator; the compressor shell loses heat to the outdoor air.
+liquid line in series with the valve; the compressor flow solves for the pressures its own
+flow causes (:func:`~.split_unit.flow_through_drops`). The charge controller, compressor,
+valve, tank (with its bleed), coils (cell-mean wall heat) and fans are those of
+:mod:`.split_cooling`, with the indoor fan over the condenser and the outdoor fan over the
+evaporator; the compressor shell loses heat to the outdoor air. The indoor coil condenses, so
+there is no latent load: the indoor relative humidity is read but changes nothing
+(``Q_latent`` = 0, ``SHR`` = 1).
 """
 
 from __future__ import annotations
@@ -22,18 +26,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from pymc_vcc.physics.components.compressor import (
-    compressor,
-    protection_speed_factor,
-    volumetric_efficiency,
-)
+from pymc_vcc.physics.components.compressor import compressor, protection_speed_factor
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
-from pymc_vcc.physics.components.heat_transfer import air_side_heat, refrigerant_htc, wall_heat
-from pymc_vcc.physics.components.pipe import pressure_drop
+from pymc_vcc.physics.components.heat_transfer import air_side_heat
 from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
-from pymc_vcc.physics.components.suction_tank import tank_outlet_enthalpy
 from pymc_vcc.physics.cycles.base import (
     N_PROPERTIES,
     Block,
@@ -47,12 +45,20 @@ from pymc_vcc.physics.cycles.base import (
     restore,
     stored_mass,
 )
-from pymc_vcc.physics.cycles.split_cooling import DP_REG, FLOW_EPS, SRC_EPS, TANK_WIDTH
 from pymc_vcc.physics.cycles.split_unit import (
     DIAGNOSTIC_INFO,
+    DP_REG,
+    FLOW_EPS,
+    OPTIONAL_OUTPUT_IDS,
     OUTPUT_INFO,
     PARAMETERS,
+    SRC_EPS,
+    coil_cell_heat,
+    coil_friction_density,
+    flow_through_drops,
+    lumped_drops,
     split_unit_constants,
+    suction_outlet,
 )
 from pymc_vcc.physics.refrigerant import p_sat_from_T, saturation_state, state
 
@@ -89,14 +95,15 @@ def cell_volumes(c):
     volumes[1 : n + 1] = c.condenser.cell_volume
     volumes[n + 1] = c.liquid_line.volume
     volumes[n + 2 : 2 * n + 2] = c.evaporator.cell_volume
-    volumes[2 * n + 2] = c.tank_volume
+    volumes[2 * n + 2] = c.tank.volume
     return volumes
 
 
 @njit(cache=True, error_model="numpy")
 def evaluate(y, u, constants, tables, dydt, out):
     """Right-hand side and outputs at state ``y`` under inputs ``u`` = (valve opening,
-    compressor speed Hz, T_ambient K, T_indoor K); see :class:`~.base.CycleModel`."""
+    compressor speed Hz, T_ambient K, T_indoor K, indoor relative humidity, unused: the indoor
+    coil condenses); see :class:`~.base.CycleModel`."""
     c = constants[0]
     props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
     cell_properties(y, c.layout.zones, tables, props)
@@ -133,24 +140,25 @@ def balances(y, u, c, tables, props, dydt, out):
         out[:] = np.nan
         dydt[:] = np.nan
         return False
-    rho_mean_c = stored_mass(vol_c[1 : n + 1], rho_c[1 : n + 1]) / (n * cond.cell_volume)
-    rho_mean_e = stored_mass(vol_e[:n], rho_e) / (n * evap.cell_volume)
+    # homogeneous friction along a coil goes with its mean specific volume
+    rho_friction_c = coil_friction_density(rho_c[1 : n + 1], n)
+    rho_friction_e = coil_friction_density(rho_e, n)
 
-    # ---- suction tank, suction and discharge pressures, compressor
-    h_vap_e = saturation_state(tables, p_e)[2]
-    h_suc = tank_outlet_enthalpy(h_ze[n], h_vap_e, TANK_WIDTH)
-    rho_out = state(tables, p_e, h_suc)[1]
-    eta_guess = volumetric_efficiency(p_c / p_e, comp.clearance, comp.exponent, comp.cf_vol)
+    # ---- suction tank (bleed), pressure drops at the compressor's own flow, compressor
+    h_suc, level, sat_e = suction_outlet(tables, p_e, h_ze[n], rho_e[n], c)
+    outlet = state(tables, p_e, h_suc)
+    rho_out = outlet[1]
     speed = speed * protection_speed_factor(p_c, comp.p_protection_start, comp.p_protection_stop)
-    m_guess = eta_guess * rho_out * comp.displacement * speed
-    p_s = p_e - pressure_drop(evap.friction, m_guess, rho_mean_e, FLOW_EPS)
-    T_s, rho_s = state(tables, p_s, h_suc)[:2]
-    p_d = (
-        p_c
-        + pressure_drop(c.vapor_line.friction, m_guess, rho_c[0], FLOW_EPS)
-        + pressure_drop(cond.friction, m_guess, rho_mean_c, FLOW_EPS)
+    flow = flow_through_drops(
+        p_c, p_e, rho_out, outlet[2], rho_c[0], rho_friction_c, rho_friction_e, speed, c, True
     )
-    m_comp, h_d, w_comp, w_ref = compressor(tables, p_s, h_suc, rho_s, p_d, speed, T_amb, comp)
+    p_s, p_d, dp_cond, dp_evap, dp_vap = lumped_drops(
+        flow, p_c, p_e, rho_c[0], rho_friction_c, rho_friction_e, c, True
+    )
+    T_s, rho_s = state(tables, p_s, h_suc)[:2]
+    m_comp, h_d, w_comp, w_ref, w_is, q_comp_amb = compressor(
+        tables, p_s, h_suc, rho_s, p_d, speed, T_amb, comp
+    )
     T_d = state(tables, p_d, h_d)[0]
     if not (math.isfinite(T_d) and math.isfinite(T_s)):
         out[:] = np.nan
@@ -179,18 +187,35 @@ def balances(y, u, c, tables, props, dydt, out):
     q_evap = 0.0
     flow_c = abs(m_comp) / cond.nominal_mass_flow
     flow_e = abs(m_valve) / evap.nominal_mass_flow
+    x_in_e = (h_zc[nc - 1] - sat_e[1]) / (sat_e[2] - sat_e[1])  # quality entering the evaporator
+    T_in_e = state(tables, p_e, h_zc[nc - 1])[0]
     for i in range(n):
-        k = i + 1  # condenser cell i is cell k of the high-side zone
+        k = i + 1  # condenser cell i is cell k of the high-side zone (inlet: cell k - 1)
         tw = y[at.Tw_cond + i]
-        alpha = refrigerant_htc(x_c[k], cond.htc_liquid, cond.htc_two_phase, cond.htc_vapor, flow_c)
-        q_ref = wall_heat(alpha, cond.refrigerant_area, tw, T_c[k])
+        q_ref = coil_cell_heat(
+            tables,
+            p_c,
+            cond,
+            tw,
+            flow_c,
+            h_zc[k - 1],
+            x_c[k - 1],
+            T_c[k - 1],
+            h_zc[k],
+            x_c[k],
+            T_c[k],
+        )
         q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
         dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
         src_c[k] = q_ref
         q_cond -= q_ref
         tw = y[at.Tw_evap + i]
-        alpha = refrigerant_htc(x_e[i], evap.htc_liquid, evap.htc_two_phase, evap.htc_vapor, flow_e)
-        q_ref = wall_heat(alpha, evap.refrigerant_area, tw, T_e[i])
+        h_in, x_in, T_in = (
+            (h_zc[nc - 1], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
+        )
+        q_ref = coil_cell_heat(
+            tables, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
+        )
         q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
         dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
         src_e[i] = q_ref
@@ -244,6 +269,16 @@ def balances(y, u, c, tables, props, dydt, out):
     out[14] = mass
     out[15] = m_src
     out[16] = m_valve
+    out[17] = w_is
+    out[18] = q_comp_amb
+    out[19] = evap.air_flow  # outdoor fan over the evaporator
+    out[20] = cond.air_flow
+    out[21] = level
+    out[22] = dp_cond
+    out[23] = dp_evap
+    out[24] = dp_vap
+    out[25] = 0.0  # the indoor coil condenses: no latent load
+    out[26] = 1.0
     return bool(np.isfinite(dydt).all())
 
 
@@ -328,6 +363,7 @@ class HeatPumpHeating(CycleModel):
     parameters = PARAMETERS
     output_info = OUTPUT_INFO
     diagnostic_info = DIAGNOSTIC_INFO
+    optional_output_ids = OPTIONAL_OUTPUT_IDS
     capacity = "Q_cond"
     evaluate = staticmethod(evaluate)
     jacobian = staticmethod(jacobian)

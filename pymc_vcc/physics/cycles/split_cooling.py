@@ -20,19 +20,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from pymc_vcc.physics.components.compressor import (
-    compressor,
-    protection_speed_factor,
-    volumetric_efficiency,
-)
+from pymc_vcc.physics.components.compressor import compressor, protection_speed_factor
 from pymc_vcc.physics.components.density import cell_state
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
-from pymc_vcc.physics.components.heat_transfer import air_side_heat, refrigerant_htc, wall_heat
-from pymc_vcc.physics.components.pipe import pressure_drop
+from pymc_vcc.physics.components.heat_transfer import air_side_heat
+from pymc_vcc.physics.components.moist_air import humidity_ratio, latent_heat
 from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
-from pymc_vcc.physics.components.suction_tank import tank_outlet_enthalpy
 from pymc_vcc.physics.cycles.base import (
     N_PROPERTIES,
     Block,
@@ -48,9 +43,18 @@ from pymc_vcc.physics.cycles.base import (
 )
 from pymc_vcc.physics.cycles.split_unit import (
     DIAGNOSTIC_INFO,
+    DP_REG,
+    FLOW_EPS,
+    OPTIONAL_OUTPUT_IDS,
     OUTPUT_INFO,
     PARAMETERS,
+    SRC_EPS,
+    coil_cell_heat,
+    coil_friction_density,
+    flow_through_drops,
+    lumped_drops,
     split_unit_constants,
+    suction_outlet,
 )
 from pymc_vcc.physics.refrigerant import p_sat_from_T, saturation_state, state
 
@@ -58,12 +62,6 @@ if TYPE_CHECKING:
     from pymc_vcc.physics.unit import Unit
 
 N_EVAL = len(OUTPUT_INFO) + len(DIAGNOSTIC_INFO)
-
-# regularisation widths
-FLOW_EPS = 1e-4  # kg/s, upwind weights and |ṁ| in pressure drops
-SRC_EPS = 1e-5  # kg/s, sign of the charge-controller source
-DP_REG = 2e4  # Pa, valve square root
-TANK_WIDTH = 2e3  # J/kg, tank outlet smooth max
 
 
 def layout(n_volumes: int) -> StateLayout:
@@ -93,14 +91,16 @@ def cell_volumes(c):
     volumes[n] = c.liquid_line.volume
     volumes[n + 1 : 2 * n + 1] = c.evaporator.cell_volume
     volumes[2 * n + 1] = c.vapor_line.volume
-    volumes[2 * n + 2] = c.tank_volume
+    volumes[2 * n + 2] = c.tank.volume
     return volumes
 
 
 @njit(cache=True, error_model="numpy")
 def evaluate(y, u, constants, tables, dydt, out):
     """Right-hand side and outputs at state ``y`` under inputs ``u`` = (valve opening,
-    compressor speed Hz, T_ambient K, T_indoor K); see :class:`~.base.CycleModel`."""
+    compressor speed Hz, T_ambient K, T_indoor K, indoor relative humidity); see
+    :class:`~.base.CycleModel`. With RH > 0 the indoor coil (the evaporator) condenses water
+    where its wall is below the dew point: that latent heat adds to the wall's load."""
     c = constants[0]
     props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
     cell_properties(y, c.layout.zones, tables, props)
@@ -112,7 +112,7 @@ def balances(y, u, c, tables, props, dydt, out):
     """:func:`evaluate` given the cell properties ``props`` of every cell."""
     at = c.layout
     n = at.h_liquid_line - at.h_cond
-    opening, speed, T_amb, T_ind = u[0], u[1], u[2], u[3]
+    opening, speed, T_amb, T_ind, rh_ind = u[0], u[1], u[2], u[3], u[4]
     p_c = y[at.p_cond]
     p_e = y[at.p_evap]
     z = y[at.z]
@@ -141,23 +141,25 @@ def balances(y, u, c, tables, props, dydt, out):
         out[:] = np.nan
         dydt[:] = np.nan
         return False
-    rho_mean_c = stored_mass(vol_c[:n], rho_c) / (n * cond.cell_volume)
-    rho_mean_e = stored_mass(vol_e[:n], rho_e) / (n * evap.cell_volume)
+    # homogeneous friction along a coil goes with its mean specific volume
+    rho_friction_c = coil_friction_density(rho_c, n)
+    rho_friction_e = coil_friction_density(rho_e, n)
 
-    # ---- suction tank, suction pressure, compressor
-    h_vap_e = saturation_state(tables, p_e)[2]
-    h_suc = tank_outlet_enthalpy(h_ze[n + 1], h_vap_e, TANK_WIDTH)
-    rho_out = state(tables, p_e, h_suc)[1]
-    eta_guess = volumetric_efficiency(p_c / p_e, comp.clearance, comp.exponent, comp.cf_vol)
+    # ---- suction tank (bleed), pressure drops at the compressor's own flow, compressor
+    h_suc, level, sat_e = suction_outlet(tables, p_e, h_ze[n + 1], rho_e[n + 1], c)
+    outlet = state(tables, p_e, h_suc)
+    rho_out = outlet[1]
     speed = speed * protection_speed_factor(p_c, comp.p_protection_start, comp.p_protection_stop)
-    m_guess = eta_guess * rho_out * comp.displacement * speed
-    dp_suction = pressure_drop(evap.friction, m_guess, rho_mean_e, FLOW_EPS) + pressure_drop(
-        c.vapor_line.friction, m_guess, rho_out, FLOW_EPS
+    flow = flow_through_drops(
+        p_c, p_e, rho_out, outlet[2], rho_out, rho_friction_c, rho_friction_e, speed, c, False
     )
-    p_s = p_e - dp_suction
+    p_s, p_d, dp_cond, dp_evap, dp_vap = lumped_drops(
+        flow, p_c, p_e, rho_out, rho_friction_c, rho_friction_e, c, False
+    )
     T_s, rho_s = state(tables, p_s, h_suc)[:2]
-    p_d = p_c + pressure_drop(cond.friction, m_guess, rho_mean_c, FLOW_EPS)
-    m_comp, h_d, w_comp, w_ref = compressor(tables, p_s, h_suc, rho_s, p_d, speed, T_amb, comp)
+    m_comp, h_d, w_comp, w_ref, w_is, q_comp_amb = compressor(
+        tables, p_s, h_suc, rho_s, p_d, speed, T_amb, comp
+    )
     T_d = state(tables, p_d, h_d)[0]
     if not (math.isfinite(T_d) and math.isfinite(T_s)):
         out[:] = np.nan
@@ -184,20 +186,43 @@ def balances(y, u, c, tables, props, dydt, out):
     src_e = np.zeros(ne)
     q_cond = 0.0
     q_evap = 0.0
+    q_sensible = 0.0
+    q_latent = 0.0
+    W_ind = humidity_ratio(T_ind, rh_ind)
     flow_c = abs(m_comp) / cond.nominal_mass_flow
     flow_e = abs(m_valve) / evap.nominal_mass_flow
+    sat_c = saturation_state(tables, p_c)
+    x_in_c = (h_d - sat_c[1]) / (sat_c[2] - sat_c[1])  # qualities entering each coil
+    x_in_e = (h_zc[n] - sat_e[1]) / (sat_e[2] - sat_e[1])
+    T_in_c = state(tables, p_c, h_d)[0]
+    T_in_e = state(tables, p_e, h_zc[n])[0]
     for i in range(n):
         tw = y[at.Tw_cond + i]
-        alpha = refrigerant_htc(x_c[i], cond.htc_liquid, cond.htc_two_phase, cond.htc_vapor, flow_c)
-        q_ref = wall_heat(alpha, cond.refrigerant_area, tw, T_c[i])
+        h_in, x_in, T_in = (
+            (h_d, x_in_c, T_in_c) if i == 0 else (h_zc[i - 1], x_c[i - 1], T_c[i - 1])
+        )
+        q_ref = coil_cell_heat(
+            tables, p_c, cond, tw, flow_c, h_in, x_in, T_in, h_zc[i], x_c[i], T_c[i]
+        )
         q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
         dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
         src_c[i] = q_ref
         q_cond -= q_ref
         tw = y[at.Tw_evap + i]
-        alpha = refrigerant_htc(x_e[i], evap.htc_liquid, evap.htc_two_phase, evap.htc_vapor, flow_e)
-        q_ref = wall_heat(alpha, evap.refrigerant_area, tw, T_e[i])
+        h_in, x_in, T_in = (
+            (h_zc[n], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
+        )
+        q_ref = coil_cell_heat(
+            tables, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
+        )
         q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
+        q_sensible += q_air
+        if rh_ind > 0.0:
+            q_wet = latent_heat(
+                evap.air_capacity, c.air_specific_heat, W_ind, tw, evap.htc_air, evap.air_area
+            )
+            q_latent += q_wet
+            q_air += q_wet
         dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
         src_e[i] = q_ref
         q_evap += q_ref
@@ -252,6 +277,16 @@ def balances(y, u, c, tables, props, dydt, out):
     out[14] = mass
     out[15] = m_src
     out[16] = m_valve
+    out[17] = w_is
+    out[18] = q_comp_amb
+    out[19] = cond.air_flow  # outdoor fan over the condenser
+    out[20] = evap.air_flow
+    out[21] = level
+    out[22] = dp_cond
+    out[23] = dp_evap
+    out[24] = dp_vap
+    out[25] = q_latent
+    out[26] = q_sensible / (q_sensible + q_latent)
     return bool(np.isfinite(dydt).all())
 
 
@@ -303,7 +338,7 @@ def total_mass(y, constants, tables):
         mass += c.evaporator.cell_volume * cell_state(tables, p_e, y[at.h_evap + i])[1]
     mass += c.liquid_line.volume * cell_state(tables, p_c, y[at.h_liquid_line])[1]
     mass += c.vapor_line.volume * cell_state(tables, p_e, y[at.h_vapor_line])[1]
-    mass += c.tank_volume * cell_state(tables, p_e, y[at.h_tank])[1]
+    mass += c.tank.volume * cell_state(tables, p_e, y[at.h_tank])[1]
     return mass
 
 
@@ -345,6 +380,7 @@ class SplitCooling(CycleModel):
     parameters = PARAMETERS
     output_info = OUTPUT_INFO
     diagnostic_info = DIAGNOSTIC_INFO
+    optional_output_ids = OPTIONAL_OUTPUT_IDS
     capacity = "Q_evap"
     evaluate = staticmethod(evaluate)
     jacobian = staticmethod(jacobian)

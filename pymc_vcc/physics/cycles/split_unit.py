@@ -1,10 +1,12 @@
 """The split unit's components as Numba records, shared by its cooling and heating cycles.
 
-Both modes run the same hardware: one compressor, one expansion valve, a suction tank, two
-coils with their fans and two connecting lines. The unit description names the coils by their
-function in the cycle's mode (``[condenser]``, ``[evaporator]``) and the fans by where they
-sit (``[outdoor_fan]``, ``[indoor_fan]``); :func:`split_unit_constants` turns it and a Table III
-vector into one record whose fields the cycle modules read by name.
+Both modes run the same hardware: one compressor, one expansion valve, a suction tank (with a
+bleed hole), two coils with their fans and two connecting lines. The unit description names
+the coils by their function in the cycle's mode (``[condenser]``, ``[evaporator]``) and the
+fans by where they sit (``[outdoor_fan]``, ``[indoor_fan]``); :func:`split_unit_constants`
+turns it and a Table III vector into one record whose fields the cycle modules read by name.
+The kernels both modes share (suction tank outlet, compressor flow through the lumped pressure
+drops, a coil cell's wall heat) are here too.
 """
 
 from __future__ import annotations
@@ -13,13 +15,21 @@ import math
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
+from numba import njit
 
-from pymc_vcc.physics.components.compressor import COMPRESSOR_RECORD
+from pymc_vcc.physics.components.compressor import (
+    COMPRESSOR_RECORD,
+    compressor_mass_flow,
+    volumetric_efficiency,
+)
 from pymc_vcc.physics.components.fan import air_capacity_rate, fan_operating_point
-from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume
+from pymc_vcc.physics.components.heat_transfer import cell_heat
+from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
+from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
 from pymc_vcc.physics.cycles.base import StateLayout
 from pymc_vcc.physics.parameters import TABLE_III
 from pymc_vcc.physics.records import record_array
+from pymc_vcc.physics.refrigerant import saturation_state, state
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import HeatExchangerGeometry, Unit
@@ -35,9 +45,10 @@ COIL_RECORD = np.dtype(
         ("htc_vapor", np.float64),
         ("htc_air", np.float64),  # air-side HTC, W/(m² K)
         ("nominal_mass_flow", np.float64),  # flow of the nominal HTCs, kg/s
+        ("air_flow", np.float64),  # air flow of the fan blowing over the coil, m³/s
         ("air_capacity", np.float64),  # air capacity rate per cell, W/K
         ("fan_power", np.float64),  # power of the fan blowing over the coil, W
-        ("friction", np.float64),  # K of Δp = K ṁ|ṁ|/ρ (correction factor included), 1/m⁴
+        ("friction", np.float64),  # K of Δp = K ṁ|ṁ|/ρ (coil multiplier and CF), 1/m⁴
     ]
 )
 """A finite-volume coil with its air side."""
@@ -50,6 +61,16 @@ VALVE_RECORD = np.dtype([("flow_area", np.float64), ("cf_lev", np.float64)])
 
 CONTROLLER_RECORD = np.dtype([("kp", np.float64), ("ki", np.float64), ("m0", np.float64)])
 """Virtual PI charge controller: gains (1/s, 1/s²) and the charge it holds (kg)."""
+
+TANK_RECORD = np.dtype([("volume", np.float64), ("bleed_fraction_full", np.float64)])
+"""Suction accumulator: volume (m³) and liquid mass fraction of its outflow when full (-)."""
+
+# regularisation widths and iteration counts of the split-unit kernels
+FLOW_EPS = 1e-4  # kg/s, upwind weights and |ṁ| in pressure drops
+SRC_EPS = 1e-5  # kg/s, sign of the charge-controller source
+DP_REG = 2e4  # Pa, valve square root
+TANK_WIDTH = 2e3  # J/kg, tank outlet smooth max
+DP_ITERATIONS = 4  # secant steps for the flow through the lumped pressure drops
 
 OUTPUT_INFO: dict[str, tuple[str, str]] = {
     "TD": ("Compressor discharge temperature", "K"),
@@ -67,14 +88,35 @@ OUTPUT_INFO: dict[str, tuple[str, str]] = {
 DIAGNOSTIC_INFO: dict[str, tuple[str, str]] = {
     "Q_cond": ("Heat rejected by the condenser refrigerant", "W"),
     "Q_evap": ("Heat absorbed by the evaporator refrigerant", "W"),
-    "W_comp": ("Compressor shaft power", "W"),
+    "W_comp": ("Compressor electrical power", "W"),
     "W_ref": ("Net compressor power to the refrigerant", "W"),
     "W_fans": ("Fan power", "W"),
     "M": ("Total refrigerant mass", "kg"),
     "mdot_src": ("Charge-controller mass source", "kg/s"),
     "mdot_valve": ("Expansion-valve mass flow", "kg/s"),
+    "W_is": ("Compressor isentropic power", "W"),
+    "Q_comp_amb": ("Compressor heat to the ambient (shell, drive, thermal limit)", "W"),
+    "V_air_out": ("Outdoor-coil air flow", "m3/s"),
+    "V_air_in": ("Indoor-coil air flow", "m3/s"),
+    "tank_level": ("Suction-tank liquid volume fraction", "1"),
+    "dp_cond": ("Condenser pressure drop", "Pa"),
+    "dp_evap": ("Evaporator pressure drop", "Pa"),
+    "dp_vap": ("Vapour-line pressure drop", "Pa"),
+    "Q_latent": ("Latent heat of the indoor coil (condensation; 0 where it condenses)", "W"),
+    "SHR": ("Sensible heat ratio of the indoor coil (1 where it condenses)", "1"),
 }
 """Further quantities after the outputs."""
+
+OPTIONAL_OUTPUT_IDS: tuple[str, ...] = ("W_comp",)
+"""Diagnostics that field loggers measure and a simulator may return as outputs (the
+compressor's electrical power makes CF_POW observable)."""
+
+INERT_PARAMETERS: tuple[str, ...] = ("FO_SPEED", "FI_SPEED")
+"""Table III parameters that change no output, by design: each fan runs at a fixed fraction of
+its rated ("nominal") speed (``speed_fraction`` in the unit file), so the fan laws give its
+flow and power from FO_FLOW/FO_POW (FI_...) alone. A separate rated speed against a fixed
+running speed would only rescale those two parameters again, which made the box span
+0.16-4.8 m³/s of outdoor air and 1.6 W-16 kW of fan power (models/README.md)."""
 
 PARAMETERS = TABLE_III
 """The calibration parameters of the split unit in either mode (paper, Table III)."""
@@ -89,7 +131,8 @@ def split_unit_dtype(layout: StateLayout) -> np.dtype:
             ("evaporator", COIL_RECORD),
             ("liquid_line", LINE_RECORD),
             ("vapor_line", LINE_RECORD),
-            ("tank_volume", np.float64),  # m³
+            ("tank", TANK_RECORD),
+            ("air_specific_heat", np.float64),  # J/(kg K)
             ("compressor", COMPRESSOR_RECORD),
             ("valve", VALVE_RECORD),
             ("controller", CONTROLLER_RECORD),
@@ -111,10 +154,13 @@ def split_unit_constants(
     n = unit.discretisation.n_volumes
     fans = {
         "outdoor": fan_operating_point(
-            p["FO_FLOW"], p["FO_POW"], p["FO_SPEED"], unit.outdoor_fan.operating_speed
+            p["FO_FLOW"],
+            p["FO_POW"],
+            p["FO_SPEED"],
+            p["FO_SPEED"] * unit.outdoor_fan.speed_fraction,
         ),
         "indoor": fan_operating_point(
-            p["FI_FLOW"], p["FI_POW"], p["FI_SPEED"], unit.indoor_fan.operating_speed
+            p["FI_FLOW"], p["FI_POW"], p["FI_SPEED"], p["FI_SPEED"] * unit.indoor_fan.speed_fraction
         ),
     }
     evaporator_fan = "indoor" if condenser_fan == "outdoor" else "outdoor"
@@ -134,13 +180,17 @@ def split_unit_constants(
             "volume": pipe_volume(p["L_VAP"], unit.vapor_line.inner_diameter),
             "friction": friction_coefficient(f, p["L_VAP"], unit.vapor_line.inner_diameter),
         },
-        "tank_volume": unit.suction_tank.volume,
+        "tank": {
+            "volume": unit.suction_tank.volume,
+            "bleed_fraction_full": unit.suction_tank.bleed_fraction_full,
+        },
+        "air_specific_heat": unit.air.specific_heat,
         "compressor": {
             "displacement": comp.displacement,
             "clearance": comp.clearance,
             "exponent": comp.polytropic_exponent,
             "isentropic_efficiency": comp.isentropic_efficiency,
-            "refrigerant_fraction": comp.refrigerant_power_fraction,
+            "loss_share": comp.loss_share_to_refrigerant,
             "shell_ua": comp.shell_ua,
             "cf_vol": p["CF_VOL"],
             "cf_pow": p["CF_POW"],
@@ -169,8 +219,12 @@ def _coil(
     length = p["L_COND" if side == "C" else "L_EVAP"]
     tube = length * hx.n_paths
     flow, power = fan
+    drop = unit.pressure_drop
     friction = friction_coefficient(
-        unit.pressure_drop.darcy_friction_factor, length, hx.tube_inner_diameter, hx.n_paths
+        drop.darcy_friction_factor * drop.coil_multiplier,
+        length,
+        hx.tube_inner_diameter,
+        hx.n_paths,
     )
     return {
         "cell_volume": pipe_volume(length, hx.tube_inner_diameter, hx.n_paths) / n,
@@ -182,7 +236,106 @@ def _coil(
         "htc_vapor": p[f"HTC_{side}V"],
         "htc_air": p[f"HTC_{side}A"],
         "nominal_mass_flow": hx.nominal_mass_flow,
+        "air_flow": flow,
         "air_capacity": air_capacity_rate(flow, unit.air.density, unit.air.specific_heat) / n,
         "fan_power": power,
         "friction": p[f"CF_DP{side}"] * friction,
     }
+
+
+@njit(cache=True, error_model="numpy")
+def suction_outlet(tables, p_e, h_tank, rho_tank, c):
+    """(enthalpy leaving the suction tank J/kg, its liquid level -, saturation state at
+    ``p_e``): vapour carrying the bleed liquid, the more the fuller the tank."""
+    sat = saturation_state(tables, p_e)
+    level = liquid_level(rho_tank, sat[3], sat[4])
+    h_out = tank_outlet_enthalpy(
+        h_tank, sat[1], sat[2], level, c.tank.bleed_fraction_full, TANK_WIDTH
+    )
+    return h_out, level, sat
+
+
+@njit(cache=True, error_model="numpy")
+def lumped_drops(flow, p_c, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, hot_gas_line):
+    """(p_s, p_d, Δp_cond, Δp_evap, Δp_vap), Pa, when ``flow`` (kg/s) passes the lumped drops:
+    the condenser's before the condensing pressure, the evaporator's after the evaporating one;
+    the vapour line's on the discharge side when it carries the hot gas (``hot_gas_line``,
+    heating), on the suction side otherwise (cooling). ``rho_friction_*`` are the coils'
+    friction densities (mean specific volume), ``rho_vapor_line`` the line's density."""
+    dp_cond = pressure_drop(c.condenser.friction, flow, rho_friction_c, FLOW_EPS)
+    dp_evap = pressure_drop(c.evaporator.friction, flow, rho_friction_e, FLOW_EPS)
+    dp_vap = pressure_drop(c.vapor_line.friction, flow, rho_vapor_line, FLOW_EPS)
+    if hot_gas_line:
+        return p_e - dp_evap, p_c + dp_cond + dp_vap, dp_cond, dp_evap, dp_vap
+    return p_e - dp_evap - dp_vap, p_c + dp_cond, dp_cond, dp_evap, dp_vap
+
+
+@njit(cache=True, error_model="numpy")
+def flow_through_drops(
+    p_c,
+    p_e,
+    rho_out,
+    drho_dp_out,
+    rho_vapor_line,
+    rho_friction_c,
+    rho_friction_e,
+    speed,
+    c,
+    hot_gas_line,
+):
+    """The compressor flow that, passing the lumped drops (:func:`lumped_drops`), sets the
+    suction and discharge pressures that give that flow, kg/s: the secant method on g(ṁ) - ṁ
+    from ṁ = 0, with g the compressor's flow at the pressures ṁ causes (g decreases with ṁ, so
+    the root is unique). The suction density is ρ at the tank outlet (``rho_out``, slope
+    ``drho_dp_out`` in pressure), linear in the drop (second-order error)."""
+    comp = c.compressor
+
+    def compressor_flow(flow):
+        p_s, p_d = lumped_drops(
+            flow, p_c, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, hot_gas_line
+        )[:2]
+        eta = volumetric_efficiency(p_d / p_s, comp.clearance, comp.exponent, comp.cf_vol)
+        rho_s = rho_out + drho_dp_out * (p_s - p_e)
+        return compressor_mass_flow(rho_s, speed, comp.displacement, eta)
+
+    m_a = 0.0
+    r_a = compressor_flow(m_a)
+    m_b = r_a
+    r_b = compressor_flow(m_b) - m_b
+    for _ in range(DP_ITERATIONS):
+        if m_b == m_a or r_b == r_a:
+            break
+        m_a, r_a, m_b = m_b, r_b, m_b - r_b * (m_b - m_a) / (r_b - r_a)
+        r_b = compressor_flow(m_b) - m_b
+    return m_b
+
+
+@njit(cache=True, error_model="numpy")
+def coil_cell_heat(tables, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T):
+    """Heat from the wall to one coil cell's refrigerant, W: the cell-mean flux of
+    :func:`~pymc_vcc.physics.components.heat_transfer.cell_heat` between its inlet (``h_in``,
+    ``x_in``, ``T_in``) and its own state (``h``, ``x``, ``T``) at pressure ``p``."""
+    T_mid = state(tables, p, 0.5 * (h_in + h))[0]
+    return cell_heat(
+        T_wall,
+        coil.refrigerant_area,
+        x_in,
+        x,
+        T_in,
+        T_mid,
+        T,
+        coil.htc_liquid,
+        coil.htc_two_phase,
+        coil.htc_vapor,
+        flow_ratio,
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def coil_friction_density(rho, n):
+    """Density of homogeneous friction along a coil of ``n`` cells of densities ``rho``, kg/m³:
+    the inverse of their mean specific volume."""
+    volume = 0.0
+    for i in range(n):
+        volume += 1.0 / rho[i]
+    return n / volume

@@ -1,0 +1,224 @@
+"""Probes of the physics over the Table III box: laws, ranges, oscillation, observability.
+
+What a refrigeration engineer checks before trusting a model that samplers will drive across
+its whole parameter box (``scripts/probe_physics.py`` runs them at full size; the tests run a
+dozen draws):
+
+* :func:`box_probe`: uniform draws at constant rated inputs; per draw, the compressor's first
+  and second law at every output time, air flows and fan powers inside the ranges the box
+  implies, no sustained oscillation of PC, charge held, and success;
+* :func:`charge_observability`: how far each 0.1 kg step of M0 moves the outputs, in sensor
+  noise standard deviations;
+* :func:`parameter_effects`: the same for each Table III parameter moved to either bound.
+
+Sensor noise is stated the way instruments are specified: 0.3 K on temperatures, 0.5 % of
+reading on pressures, 1 % of reading on mass flow and electrical power (:func:`noise_sd`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from pymc_vcc.physics.cycles import OUTPUT_IDS, OUTPUT_INFO
+from pymc_vcc.physics.cycles.split_unit import DIAGNOSTIC_INFO
+from pymc_vcc.physics.inputs import INPUT_IDS, constant_inputs
+from pymc_vcc.physics.simulate import simulate
+from pymc_vcc.physics.unit import Unit, load_unit
+
+TEMPERATURE_NOISE = 0.3
+"""Standard deviation of a temperature sensor, K."""
+
+RELATIVE_NOISE = {"Pa": 0.005, "kg/s": 0.01, "W": 0.01}
+"""Standard deviation of pressure, mass-flow and power sensors, as a fraction of the reading."""
+
+OSCILLATION_WINDOW = 300.0
+"""Seconds at the end of a constant-input run over which PC must be still."""
+
+OSCILLATION_LIMIT = 1e-3
+"""Largest peak-to-peak change of PC over :data:`OSCILLATION_WINDOW`, relative to PC."""
+
+MASS_LIMIT = 1e-4
+"""Largest relative deviation of the total refrigerant mass from M0."""
+
+PROBE_WALL_TIME = 600.0
+"""Wall-clock limit (s) of the observability runs: they measure physics, not speed, and may
+share a busy machine (the box probe keeps the unit's own limit, which samplers face)."""
+
+
+def noise_sd(output: str, value: np.ndarray | float) -> np.ndarray:
+    """Sensor noise standard deviation of ``output`` at ``value`` (SI)."""
+    unit = {**OUTPUT_INFO, **DIAGNOSTIC_INFO}[output][1]
+    if unit == "K":
+        return np.full_like(np.asarray(value, dtype=float), TEMPERATURE_NOISE)
+    return RELATIVE_NOISE[unit] * np.abs(np.asarray(value, dtype=float))
+
+
+def separation(first: xr.Dataset, second: xr.Dataset) -> dict[str, float]:
+    """Per output, the time-averaged |difference| of two runs in noise standard deviations."""
+    return {
+        name: float(
+            np.mean(np.abs(second[name].values - first[name].values) / noise_sd(name, first[name]))
+        )
+        for name in OUTPUT_IDS
+    }
+
+
+def rated_inputs(unit: Unit, duration: float) -> xr.Dataset:
+    """The unit's rating point held for ``duration`` s."""
+    return constant_inputs(duration, **{name: getattr(unit.rating, name) for name in INPUT_IDS})
+
+
+@dataclass(frozen=True)
+class DrawReport:
+    """What :func:`box_probe` found for one parameter draw."""
+
+    theta: dict[str, float]
+    status: str
+    failure_reason: str
+    first_law: bool  # electrical power >= power to the refrigerant at every output time
+    second_law: bool  # power to the refrigerant >= isentropic power at every output time
+    air_in_range: bool  # air flows and fan powers inside the ranges the box implies
+    oscillation: float  # peak-to-peak PC over the last window / PC
+    mass_error: float  # max |M - M0| / M0
+
+    @property
+    def holds(self) -> bool:
+        """Every check passed (a failed run holds nothing)."""
+        return (
+            self.status == "ok"
+            and self.first_law
+            and self.second_law
+            and self.air_in_range
+            and self.oscillation < OSCILLATION_LIMIT
+            and self.mass_error < MASS_LIMIT
+        )
+
+
+def air_ranges(unit: Unit) -> dict[str, tuple[float, float]]:
+    """Air flow (m³/s) and fan power (W) ranges over the box, by the fan laws at each fan's
+    running speed (``speed_fraction`` of its rated speed)."""
+    table = unit.parameters
+    out, ind = unit.outdoor_fan.speed_fraction, unit.indoor_fan.speed_fraction
+    return {
+        "V_air_out": (table["FO_FLOW"].low * out, table["FO_FLOW"].high * out),
+        "V_air_in": (table["FI_FLOW"].low * ind, table["FI_FLOW"].high * ind),
+        "W_fans": (
+            table["FO_POW"].low * out**3 + table["FI_POW"].low * ind**3,
+            table["FO_POW"].high * out**3 + table["FI_POW"].high * ind**3,
+        ),
+    }
+
+
+def check_draw(unit: Unit, theta: Mapping[str, float], duration: float = 1200.0) -> DrawReport:
+    """Run ``theta`` at constant rated inputs for ``duration`` s and check it (see module)."""
+    run = simulate(unit, theta, rated_inputs(unit, duration), diagnostics=True)
+    if run.attrs["status"] != "ok":
+        nan = float("nan")
+        return DrawReport(
+            dict(theta), "failed", run.attrs["failure_reason"], False, False, False, nan, nan
+        )
+    tolerance = 1e-9 * run["W_comp"].values
+    first_law = bool(np.all(run["W_ref"].values <= run["W_comp"].values + tolerance))
+    second_law = bool(np.all(run["W_ref"].values >= run["W_is"].values - tolerance))
+    air = all(
+        np.all((low * (1 - 1e-9) <= run[name].values) & (run[name].values <= high * (1 + 1e-9)))
+        for name, (low, high) in air_ranges(unit).items()
+    )
+    recent = run["PC"].sel(time=slice(duration - OSCILLATION_WINDOW, None)).values
+    return DrawReport(
+        theta=dict(theta),
+        status="ok",
+        failure_reason="",
+        first_law=first_law,
+        second_law=second_law,
+        air_in_range=bool(air),
+        oscillation=float(np.ptp(recent) / np.mean(recent)),
+        mass_error=float(run.attrs["mass_error"]),
+    )
+
+
+def box_probe(
+    n_draws: int, seed: int = 0, unit: Unit | None = None, duration: float = 1200.0
+) -> list[DrawReport]:
+    """:func:`check_draw` for ``n_draws`` uniform draws from the unit's Table III box."""
+    unit = load_unit() if unit is None else unit
+    draws = unit.parameters.sample_uniform(n_draws, np.random.default_rng(seed))
+    return [check_draw(unit, theta, duration) for theta in draws]
+
+
+def charge_observability(
+    charges: Sequence[float],
+    unit: Unit | None = None,
+    inputs: xr.Dataset | None = None,
+    fixed: Mapping[str, float] | None = None,
+) -> list[tuple[float, float, str, float]]:
+    """For each step between consecutive ``charges`` (kg): (M0 low, M0 high, the output that
+    moves most, its time-averaged change in noise standard deviations).
+
+    ``inputs`` defaults to the rating point held for 2000 s, compared over its last 500 s
+    (steady state); pass ``builtin_inputs()`` to compare over the whole step profile.
+    """
+    unit = load_unit() if unit is None else unit
+    steady = inputs is None
+    inputs = rated_inputs(unit, 2000.0) if steady else inputs
+    runs = []
+    for charge in charges:
+        theta = {**(fixed or {}), "M0": float(charge)}
+        run = simulate(unit, theta, inputs, max_wall_time=PROBE_WALL_TIME)
+        if run.attrs["status"] != "ok":
+            raise RuntimeError(f"M0 = {charge} kg failed: {run.attrs['failure_reason']}")
+        runs.append(run.sel(time=slice(1500.0, None)) if steady else run)
+    rows = []
+    for (low, first), (high, second) in zip(
+        zip(charges, runs, strict=True), zip(charges[1:], runs[1:], strict=True), strict=False
+    ):
+        moved = separation(first, second)
+        best = max(moved, key=moved.__getitem__)
+        rows.append((float(low), float(high), best, moved[best]))
+    return rows
+
+
+def parameter_effects(
+    unit: Unit | None = None, inputs: xr.Dataset | None = None
+) -> dict[str, tuple[tuple[str, float], tuple[str, float]]]:
+    """For each Table III parameter: (output, separation in noise sd) of the most moved output
+    when the parameter goes from nominal to its lower, then its upper bound (rated inputs held
+    2000 s, last 500 s compared, unless ``inputs`` is given)."""
+    unit = load_unit() if unit is None else unit
+    steady = inputs is None
+    inputs = rated_inputs(unit, 2000.0) if steady else inputs
+
+    def run(theta: Mapping[str, float]) -> xr.Dataset:
+        result = simulate(unit, theta, inputs, max_wall_time=PROBE_WALL_TIME)
+        return result.sel(time=slice(1500.0, None)) if steady else result
+
+    nominal = run({})
+    effects = {}
+    for spec in unit.parameters:
+        pair = []
+        for bound in (spec.low, spec.high):
+            moved = run({spec.id: bound})
+            if moved.attrs["status"] != "ok":
+                pair.append(("failed", float("nan")))
+                continue
+            distance = separation(nominal, moved)
+            best = max(distance, key=distance.__getitem__)
+            pair.append((best, distance[best]))
+        effects[spec.id] = (pair[0], pair[1])
+    return effects
+
+
+__all__ = [
+    "DrawReport",
+    "air_ranges",
+    "box_probe",
+    "charge_observability",
+    "check_draw",
+    "noise_sd",
+    "parameter_effects",
+    "separation",
+]
