@@ -61,7 +61,10 @@ def separation(first: xr.Dataset, second: xr.Dataset) -> dict[str, float]:
     """Per output, the time-averaged |difference| of two runs in noise standard deviations."""
     return {
         name: float(
-            np.mean(np.abs(second[name].values - first[name].values) / noise_sd(name, first[name]))
+            np.mean(
+                np.abs(second[name].values - first[name].values)
+                / noise_sd(name, first[name].values)
+            )
         )
         for name in OUTPUT_IDS
     }
