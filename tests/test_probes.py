@@ -41,7 +41,7 @@ def test_a_dozen_box_draws_hold_every_law(unit):
     reports = box_probe(12, seed=7, unit=unit)
     failed = [r for r in reports if not r.holds]
     assert not failed, failed
-    assert all(r.oscillation < 1e-3 and r.mass_error < 1e-4 for r in reports)
+    assert all(r.oscillation < 1e-3 and r.mass_error < 5e-4 for r in reports)
 
 
 def test_charge_stays_observable_when_the_tank_fills(unit):
