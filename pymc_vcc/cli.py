@@ -299,6 +299,8 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         choices=list(METHODS),
         default=["ks", "ks-noise", "windowed", "likelihood"],
+        help="methods compared on the same noisy datasets (default: ks ks-noise windowed "
+        "likelihood)",
     )
 
 
