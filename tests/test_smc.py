@@ -240,5 +240,5 @@ def test_charge_calibration_on_the_vcc_simulator_recovers_the_true_charge():
     assert abs(charge.mean() - 1.5) < 0.05  # kg; the prior spans [0.9, 2.2]
     assert charge.std() < 0.1
     # a work budget: the charge-observable physics of issue 13 gives a sharper likelihood,
-    # hence more tempering stages (600 measured; 480 before it)
+    # hence more tempering stages (600 measured with it)
     assert idata.sample_stats.attrs["n_simulations"] < 800
