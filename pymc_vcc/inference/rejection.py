@@ -82,8 +82,7 @@ class SimulationTask:
     Called with a list of ``(phase, index, theta_row)``; returns one
     :class:`~pymc_vcc.execution.store.SimulationRecord` per item. A simulation that kills its worker
     process comes back from the executor as a :class:`~pymc_vcc.execution.executors.WorkerCrash`,
-    which
-    :func:`_run_phase` records as a ``worker-crash`` failure.
+    which :func:`_run_phase` records as a ``worker-crash`` failure.
     """
 
     simulator: Simulator
