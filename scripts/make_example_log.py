@@ -2,8 +2,7 @@
 
 The truth is :func:`pymc_vcc.physics.simulate.simulate` of the built-in unit at nominal parameters
 on the built-in step profile. The log covers 300 s to 1800 s of it (the unit already running),
-sampled
-every 1.5-3.5 s, with sensor noise, engineering units (°C, bar gauge, g/s, %, rpm), ISO
+sampled every 1.5-3.5 s, with sensor noise, engineering units (°C, bar gauge, g/s, %, rpm), ISO
 timestamps, a logger outage of 80 s and a 45 s drop-out of the suction temperature sensor.
 Run ``.venv/bin/python scripts/make_example_log.py`` to regenerate it.
 """
