@@ -391,10 +391,17 @@ def plot_predictive(
             values, _ = display(uncalibrated[name].values, units)
             ax.plot(uncalibrated["time"].values, values, color="tab:red", label="uncalibrated")
         if calibration_end is not None:
-            ax.axvline(calibration_end, color="grey", linestyle="--", linewidth=1)
+            ax.axvline(
+                calibration_end,
+                color="grey",
+                linestyle="--",
+                linewidth=1,
+                label="end of calibration data",
+            )
         ax.set_title(bands[name].attrs.get("long_name", name), fontsize=9)
         ax.set_ylabel(f"{name} ({display(np.zeros(1), units)[1]})")
         ax.set_xlabel("time (s)")
-    axes[0].legend(fontsize=6)
-    figure.tight_layout()
+    handles, labels = axes[0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=8)
+    figure.tight_layout(rect=(0.0, 0.35 / figure.get_size_inches()[1], 1.0, 1.0))  # 0.35 in
     return figure

@@ -158,11 +158,18 @@ def test_predictive_figure_says_measured_and_units():
     )
     observed = xr.Dataset({"PD": ("time", np.full(4, 27e5), attrs)}, coords={"time": time})
     tree = xr.DataTree.from_dict({"posterior_predictive": predictive, "observed_data": observed})
-    ax = plot_predictive(tree).axes[0]
+    figure = plot_predictive(tree, calibration_end=2.0)
+    ax = figure.axes[0]
     assert ax.get_title() == "Compressor discharge pressure"
     assert ax.get_ylabel() == "PD (bar)"
-    legend = [text.get_text() for text in ax.get_legend().get_texts()]
-    assert legend == ["90 % band (noise-free)", "predictive median", "measured"]
+    (legend,) = figure.legends
+    legend = [text.get_text() for text in legend.get_texts()]
+    assert legend == [
+        "90 % band (noise-free)",
+        "predictive median",
+        "measured",
+        "end of calibration data",
+    ]
     assert "truth" not in " ".join(legend)
 
 
