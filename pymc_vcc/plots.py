@@ -120,8 +120,9 @@ def plot_inputs(inputs: xr.Dataset, *, calibration_end: float | None = None) -> 
 def _densities(
     tree: xr.DataTree, names: Sequence[str], uniform: Mapping[str, tuple[float, float]]
 ) -> xr.Dataset:
-    """ArviZ's KDE of the prior and posterior draws of ``names`` over ``group``; the prior of
-    a parameter in ``uniform`` is its exact density, flat on [low, high] and 0 outside."""
+    """ArviZ's KDE of the prior and posterior draws of ``names``, stacked along ``group``, as
+    ``plot_prior_posterior`` takes precomputed densities; the prior of a parameter in
+    ``uniform`` is its exact density instead, flat on [low, high] and 0 outside."""
     from arviz_stats import kde
 
     groups = []
@@ -132,9 +133,8 @@ def _densities(
     density = density.drop_vars([c for c in density.coords if c.startswith("bw_")])
     density = density.assign_coords(group=["prior", "posterior"])
     n_points = density.sizes["kde_dim"]
-    for name, (low, high) in uniform.items():
-        if name not in density:
-            continue
+    for name in (name for name in names if name in uniform):
+        low, high = uniform[name]
         x = np.concatenate([[low], np.linspace(low, high, n_points - 2), [high]])
         y = np.concatenate([[0.0], np.full(n_points - 2, 1.0 / (high - low)), [0.0]])
         density[name].loc[{"group": "prior"}] = np.stack([x, y])
@@ -189,8 +189,8 @@ def plot_prior_posterior(
         visuals={"title": {"size": 8}},
     )
     lines = collection.viz["dist"]
-    if truth:
-        shown = {name: value for name, value in truth.items() if name in names}
+    shown = {name: value for name, value in (truth or {}).items() if name in names}
+    if shown:
         azp.add_lines(collection, shown, visuals={"ref_line": {"color": "tab:red"}})
         for line in collection.viz["ref_line"].to_dataset().data_vars.values():
             np.ravel(line.values)[0].set_label("true value")
