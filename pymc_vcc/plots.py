@@ -352,13 +352,12 @@ def plot_predictive(
     uncalibrated: xr.Dataset | None = None,
     n_columns: int = 3,
     interval: float = 0.9,
-    reference_label: str = "measured",
 ) -> Figure:
     """Figs. 6 and 8: posterior predictive median and central band against the measured data.
 
     Draws the :func:`~pymc_vcc.inference.predictive.predictive_bands` of the tree written by
     :func:`~pymc_vcc.inference.predictive.simulate_predictive` (smooth with ``noise=False``,
-    which the legend says) and its ``observed_data``, labelled ``reference_label``;
+    which the legend says) and its ``observed_data``, labelled "measured";
     ``uncalibrated`` adds the outputs of an uncalibrated model (Fig. 8). Panels are titled by
     the outputs' long names, in °C, bar and g/s; the calibration window's end is dashed.
     """
@@ -385,7 +384,7 @@ def plot_predictive(
                 measured,
                 color="black",
                 linewidth=0.6,
-                label=reference_label,
+                label="measured",
             )
         if uncalibrated is not None and name in uncalibrated:
             values, _ = display(uncalibrated[name].values, units)
