@@ -138,7 +138,7 @@ def _validate(args: argparse.Namespace) -> int:
         methods=args.methods,
     )
     text = f"{result.format_table()}\n\n{result.wall_seconds:.0f} s"
-    return _report(args, text, result.summary(), result.files)
+    return _report(args, text, result.summary())
 
 
 def _sobol(args: argparse.Namespace) -> int:

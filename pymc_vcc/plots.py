@@ -1,7 +1,10 @@
-"""The paper's figures from results: inputs (Fig. 4), prior vs posterior KDEs (Figs. 5, 7),
-posterior predictive bands (Figs. 6, 8) and Sobol heatmaps (Figs. 9, 10).
+"""The paper's figures from results: inputs (Fig. 4), prior vs posterior densities (Figs. 5,
+7), posterior predictive bands (Figs. 6, 8), Sobol heatmaps (Figs. 9, 10) and Table II's
+charge posteriors.
 
-Each function returns a matplotlib Figure; :func:`save_figure` writes it as PNG and SVG.
+Densities and the charge forest are drawn by ArviZ (``arviz_plots``: ``plot_prior_posterior``,
+``plot_forest``); time series and heatmaps, which ArviZ does not draw, by matplotlib. Each
+function returns a matplotlib Figure; :func:`save_figure` writes it as PNG and SVG.
 Temperatures are shown in °C, pressures in bar and mass flows in g/s, as engineers read them.
 """
 
@@ -9,15 +12,19 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib.pyplot as plt
 import numpy as np
 import xarray as xr
 from matplotlib.figure import Figure
-from scipy.stats import gaussian_kde
+from matplotlib.lines import Line2D
 
 from pymc_vcc.execution.output_folder import atomic_path
 from pymc_vcc.inference.predictive import predictive_bands
+
+if TYPE_CHECKING:
+    from arviz_base.labels import BaseLabeller, MapLabeller
 
 _DISPLAY_UNITS = {
     "K": ("°C", lambda v: v - 273.15),
@@ -49,7 +56,7 @@ def in_display_units(
     return result
 
 
-def labeller(tree: xr.DataTree, parameters: Sequence | None = None):
+def labeller(tree: xr.DataTree, parameters: Sequence | None = None) -> MapLabeller:
     """An ArviZ labeller naming variables by long name and unit (on a second line), e.g.
     "Compressor discharge pressure (bar)": outputs from their attrs in ``tree``, parameters
     from ``parameters`` (specs with ``id``, ``name`` and ``unit``, e.g. ``unit.parameters``)."""
@@ -110,14 +117,30 @@ def plot_inputs(inputs: xr.Dataset, *, calibration_end: float | None = None) -> 
     return figure
 
 
-def _kde_line(ax, samples: np.ndarray, low: float, high: float, **style) -> None:
-    samples = samples[np.isfinite(samples)]
-    if samples.size < 2 or np.ptp(samples) == 0:
-        if samples.size:
-            ax.axvline(samples[0], **style)
-        return
-    grid = np.linspace(low, high, 200)
-    ax.plot(grid, gaussian_kde(samples)(grid), **style)
+def _densities(
+    tree: xr.DataTree, names: Sequence[str], uniform: Mapping[str, tuple[float, float]]
+) -> xr.Dataset:
+    """ArviZ's KDE of the prior and posterior draws of ``names``, stacked along ``group``, as
+    ``plot_prior_posterior`` takes precomputed densities; the prior of a parameter in
+    ``uniform`` is its exact density instead, flat on [low, high] and 0 outside."""
+    from arviz_stats import kde
+
+    groups = []
+    for group in ("prior", "posterior"):
+        draws = tree[group].to_dataset()[list(names)]
+        groups.append(kde(draws, dim=[d for d in ("chain", "draw") if d in draws.dims]))
+    density = xr.concat(groups, dim="group", coords="minimal", compat="override")
+    density = density.drop_vars([c for c in density.coords if c.startswith("bw_")])
+    density = density.assign_coords(group=["prior", "posterior"])
+    n_points = density.sizes["kde_dim"]
+    for name in (name for name in names if name in uniform):
+        low, high = uniform[name]
+        x = np.concatenate([[low], np.linspace(low, high, n_points - 2), [high]])
+        y = np.concatenate([[0.0], np.full(n_points - 2, 1.0 / (high - low)), [0.0]])
+        density[name].loc[{"group": "prior"}] = np.stack([x, y])
+    for name in density.data_vars:
+        density[name].attrs["kind"] = "kde"
+    return density
 
 
 def plot_prior_posterior(
@@ -125,43 +148,58 @@ def plot_prior_posterior(
     parameters: Sequence[str] | None = None,
     *,
     truth: Mapping[str, float] | None = None,
-    long_names: Mapping[str, str] | None = None,
+    labels: BaseLabeller | None = None,
     n_columns: int = 4,
     uniform: Mapping[str, tuple[float, float]] | None = None,
 ) -> Figure:
-    """Figs. 5 and 7: KDEs of prior and posterior draws per parameter, true values marked.
+    """Figs. 5 and 7 with ArviZ's ``plot_prior_posterior``: prior and posterior density of
+    each parameter, true values dashed.
 
-    ``uniform`` gives the bounds of parameters whose prior is uniform: their prior is drawn
-    as the flat density it is, not as a KDE of its draws (which bulges and sags at the ends).
+    Args:
+        tree: a result with ``prior`` and ``posterior`` groups (one variable per parameter).
+        parameters: the parameters drawn, in order (default: every posterior variable).
+        truth: true values, drawn as dashed lines labelled "true value".
+        labels: an ArviZ labeller for the panel titles, e.g. :func:`labeller` (long names
+            and units).
+        n_columns: panels per row.
+        uniform: bounds of parameters whose prior is uniform: their prior is drawn as its
+            exact flat density, not as a KDE of its draws (which bulges and sags at the ends).
     """
-    prior = tree["prior"].to_dataset()
+    import arviz_plots as azp
+
     posterior = tree["posterior"].to_dataset()
     names = list(parameters) if parameters is not None else list(posterior.data_vars)
-    missing = [name for name in names if name not in posterior.data_vars]
+    missing = [n for n in names if n not in posterior.data_vars or n not in tree["prior"]]
     if missing:
-        raise ValueError(f"parameters {missing} are not in the posterior {list(posterior)}")
-    figure, axes = _grid(len(names), n_columns, (3.2, 2.4))
-    for ax, name in zip(axes, names, strict=False):
-        prior_draws = prior[name].values.ravel()
-        posterior_draws = posterior[name].values.ravel()
-        both = np.concatenate([prior_draws, posterior_draws])
-        low, high = float(np.nanmin(both)), float(np.nanmax(both))
-        if uniform is not None and name in uniform:
-            lower, upper = uniform[name]
-            ax.plot(
-                [lower, lower, upper, upper],
-                [0.0, 1.0 / (upper - lower), 1.0 / (upper - lower), 0.0],
-                color="tab:grey",
-                label="prior",
-            )
-        else:
-            _kde_line(ax, prior_draws, low, high, color="tab:grey", label="prior")
-        _kde_line(ax, posterior_draws, low, high, color="tab:blue", label="posterior")
-        if truth is not None and name in truth:
-            ax.axvline(truth[name], color="tab:red", linestyle="--", label="true")
-        ax.set_title((long_names or {}).get(name, name), fontsize=8)
-        ax.set_yticks([])
-    axes[0].legend(fontsize=7)
+        raise ValueError(
+            f"parameters {missing} are not in the posterior and prior; the posterior has "
+            f"{list(posterior.data_vars)}"
+        )
+    n_cols = min(n_columns, len(names))
+    n_rows = -(-len(names) // n_cols)
+    collection = azp.plot_prior_posterior(
+        tree,
+        var_names=names,
+        kind="kde",
+        labeller=labels,
+        col_wrap=n_cols,
+        figure_kwargs={"figsize": (3.2 * n_cols, 2.4 * n_rows)},
+        color=["tab:grey", "tab:blue"],
+        stats={"dist": _densities(tree, names, uniform or {})},
+        visuals={"title": {"size": 8}},
+    )
+    lines = collection.viz["dist"]
+    shown = {name: value for name, value in (truth or {}).items() if name in names}
+    if shown:
+        azp.add_lines(collection, shown, visuals={"ref_line": {"color": "tab:red"}})
+        for line in collection.viz["ref_line"].to_dataset().data_vars.values():
+            np.ravel(line.values)[0].set_label("true value")
+    for name in names:
+        for group in ("prior", "posterior"):
+            lines[name].sel(group=group).item().set_label(group)
+    collection.viz["legend"]["group"].item().remove()  # ArviZ's, at the figure's edge
+    figure = collection.viz["figure"].item()
+    figure.axes[0].legend(fontsize=7)
     figure.tight_layout()
     return figure
 
@@ -191,9 +229,7 @@ def plot_sobol_heatmap(indices: xr.Dataset, order: str = "S1") -> Figure:
     parameters = [str(p) for p in indices["parameter"].values]
     outputs = [str(o) for o in indices["output"].values]
     figure, ax = plt.subplots(figsize=(1.5 + 0.8 * len(outputs), 1.6 + 0.32 * len(parameters)))
-    colours = plt.get_cmap("viridis").copy()
-    colours.set_under("tab:blue")
-    colours.set_over("tab:red")
+    colours = plt.get_cmap("viridis").with_extremes(under="tab:blue", over="tab:red")
     image = ax.imshow(values, cmap=colours, vmin=0.0, vmax=1.0, aspect="auto")
     uncertain = conf > np.abs(values)
     for (row, column), value in np.ndenumerate(values):
@@ -257,22 +293,54 @@ def plot_sobol_heatmap(indices: xr.Dataset, order: str = "S1") -> Figure:
 def plot_charge_posteriors(
     trees: Sequence[xr.DataTree], references: Sequence[float], parameter: str = "M0"
 ) -> Figure:
-    """Table II as a figure: the charge posterior of each dataset with its reference value."""
-    figure, ax = plt.subplots(figsize=(6.0, 3.0))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    """Table II as ArviZ's ``plot_forest``: one row per dataset, the posterior median of the
+    charge with its 50 % and 95 % intervals, the dataset's reference charge marked.
+
+    Datasets with more posterior draws than the smallest are thinned evenly to its count.
+    """
+    import arviz_plots as azp
+    from arviz_base.labels import MapLabeller
+
+    if len(trees) != len(references) or not trees:
+        raise ValueError(
+            f"give one reference per tree: {len(trees)} trees, {len(references)} references"
+        )
     draws = [tree["posterior"][parameter].values.ravel() for tree in trees]
-    every = np.concatenate([np.asarray(references, dtype=float), *draws])
-    low, high = float(every.min()), float(every.max())
-    pad = 0.1 * (high - low)
-    for index, (samples, reference) in enumerate(zip(draws, references, strict=True)):
-        colour = colours[index % len(colours)]
-        _kde_line(ax, samples, low - pad, high + pad, color=colour, label=f"{reference} kg")
-        ax.axvline(reference, color=colour, linestyle="--", linewidth=1)
-    ax.set_xlabel("total refrigerant mass M0 (kg)")
-    ax.set_yticks([])
-    ax.set_title("charge posteriors (dashed: reference)")
-    ax.legend(fontsize=8)
-    figure.tight_layout()
+    n_draws = min(len(d) for d in draws)
+    thinned = [d[np.linspace(0, len(d) - 1, n_draws).round().astype(int)] for d in draws]
+    rows = [f"dataset {k + 1}: {reference:g} kg" for k, reference in enumerate(references)]
+    posterior = xr.Dataset(
+        {parameter: (("dataset", "chain", "draw"), np.stack(thinned)[:, np.newaxis, :])},
+        coords={"dataset": rows},
+    )
+    collection = azp.plot_forest(
+        xr.DataTree.from_dict({"posterior": posterior}),
+        combined=True,
+        labels=["dataset"],
+        ci_probs=[0.5, 0.95],
+        point_estimate="median",
+        labeller=MapLabeller(var_name_map={parameter: f"{parameter} (kg)"}),
+        figure_kwargs={"figsize": (7.0, 1.0 + 0.45 * len(rows))},
+    )
+    figure = collection.viz["figure"].item()
+    forest = figure.axes[-1]
+    for row, reference in zip(rows, references, strict=True):
+        marker = collection.viz["point_estimate"][parameter].sel(dataset=row).item()
+        height = marker.get_offsets()[0][1]
+        forest.plot(reference, height, marker="x", color="tab:red", markersize=8, linestyle="")
+    forest.set_xlabel(f"total refrigerant mass {parameter} (kg)")
+    forest.legend(
+        [
+            Line2D([], [], marker="o", color="C0", markerfacecolor="white"),
+            Line2D([], [], marker="x", color="tab:red", linestyle=""),
+        ],
+        ["posterior median, 50 % and 95 % intervals", "reference charge"],
+        fontsize=7,
+        loc="lower left",
+        bbox_to_anchor=(0.0, 1.0),
+        ncols=2,
+        frameon=False,
+    )
     return figure
 
 
@@ -284,14 +352,14 @@ def plot_predictive(
     uncalibrated: xr.Dataset | None = None,
     n_columns: int = 3,
     interval: float = 0.9,
-    reference_label: str = "observed",
 ) -> Figure:
-    """Figs. 6 and 8: posterior predictive median and central band against the reference.
+    """Figs. 6 and 8: posterior predictive median and central band against the measured data.
 
     Draws the :func:`~pymc_vcc.inference.predictive.predictive_bands` of the tree written by
-    :func:`~pymc_vcc.inference.predictive.simulate_predictive` and its ``observed_data`` (the
-    reference, labelled ``reference_label``: e.g. "measured" or "truth"); ``uncalibrated``
-    adds the outputs of an uncalibrated model (Fig. 8). The calibration window's end is dashed.
+    :func:`~pymc_vcc.inference.predictive.simulate_predictive` (smooth with ``noise=False``,
+    which the legend says) and its ``observed_data``, labelled "measured";
+    ``uncalibrated`` adds the outputs of an uncalibrated model (Fig. 8). Panels are titled by
+    the outputs' long names, in °C, bar and g/s; the calibration window's end is dashed.
     """
     bands = predictive_bands(tree, interval)
     reference = tree["observed_data"].to_dataset() if "observed_data" in tree.children else None
@@ -299,31 +367,40 @@ def plot_predictive(
     figure, axes = _grid(len(names), n_columns, (4.0, 2.5))
     time = bands["time"].values
     percent = round(100 * float(bands.attrs.get("interval", 0.9)))
+    noisy = bool(tree["posterior_predictive"].attrs.get("noise", 0))
+    band_label = f"{percent} % band" + (" (with output noise)" if noisy else " (noise-free)")
     for ax, name in zip(axes, names, strict=False):
         units = bands[name].attrs.get("units", "")
         lower, median, upper = (
             display(bands[name].sel(band=band).values, units)[0]
             for band in ("lower", "median", "upper")
         )
-        ax.fill_between(time, lower, upper, color="tab:blue", alpha=0.25, label=f"{percent} % band")
+        ax.fill_between(time, lower, upper, color="tab:blue", alpha=0.25, label=band_label)
         ax.plot(time, median, color="tab:blue", label="predictive median")
         if reference is not None and name in reference:
-            truth, _ = display(reference[name].values, units)
+            measured, _ = display(reference[name].values, units)
             ax.plot(
                 reference["time"].values,
-                truth,
+                measured,
                 color="black",
-                linestyle=":",
-                label=reference_label,
+                linewidth=0.6,
+                label="measured",
             )
         if uncalibrated is not None and name in uncalibrated:
             values, _ = display(uncalibrated[name].values, units)
             ax.plot(uncalibrated["time"].values, values, color="tab:red", label="uncalibrated")
         if calibration_end is not None:
-            ax.axvline(calibration_end, color="grey", linestyle="--", linewidth=1)
-        ax.set_title(name, fontsize=9)
-        ax.set_ylabel(display(np.zeros(1), units)[1])
+            ax.axvline(
+                calibration_end,
+                color="grey",
+                linestyle="--",
+                linewidth=1,
+                label="end of calibration data",
+            )
+        ax.set_title(bands[name].attrs.get("long_name", name), fontsize=9)
+        ax.set_ylabel(f"{name} ({display(np.zeros(1), units)[1]})")
         ax.set_xlabel("time (s)")
-    axes[0].legend(fontsize=6)
-    figure.tight_layout()
+    handles, labels = axes[0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=8)
+    figure.tight_layout(rect=(0.0, 0.35 / figure.get_size_inches()[1], 1.0, 1.0))  # 0.35 in
     return figure

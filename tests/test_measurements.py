@@ -398,3 +398,39 @@ def test_a_step_of_a_commanded_input_starts_a_new_hold_block(tmp_path):
     inputs = measured.inputs
     np.testing.assert_allclose(inputs["time"], [0.0, 13.0, 23.0, 33.0, 40.0])
     np.testing.assert_allclose(inputs["valve_opening"], [0.4, 0.6, 0.6, 0.6, 0.6])
+
+
+def test_indoor_humidity_input_and_compressor_power_output(tmp_path):
+    header = HEADER + ",RH [%],Power [kW]"
+    rows = [f"{row},{45 + t},{1.2 + 0.01 * t}" for t, row in enumerate(_rows(range(11)))]
+    measured = load_measurements(
+        _write(tmp_path / "log.csv", rows, header),
+        {**COLUMNS, "RH": "RH_indoor", "Power": "W_comp"},
+        time_column="t",
+        input_hold=5.0,
+    )
+    np.testing.assert_allclose(measured.inputs["RH_indoor"], [0.47, 0.52, 0.55])
+    power = measured.observed["W_comp"]
+    np.testing.assert_allclose(power, 1200.0 + 10.0 * np.arange(11.0))
+    assert power.attrs == {"units": "W", "long_name": "Compressor electrical power"}
+    assert measured.report.outputs == ("TD", "PD", "W_comp")
+    assert measured.report.units["Power"] == "kW"
+
+
+@pytest.mark.parametrize(
+    ("unit", "values", "match"),
+    [
+        ("1", "45", r"RH_indoor = 45.0 1 .* outside the allowed range \[0.0, 1.0\]"),
+        ("W", "1.2", r"median 1.2 W is implausible.*look like kW"),
+    ],
+)
+def test_humidity_and_power_in_the_wrong_unit_are_refused(tmp_path, unit, values, match):
+    header = HEADER + f",X [{unit}]"
+    rows = [f"{row},{values}" for row in _rows(range(5))]
+    target = "RH_indoor" if unit == "1" else "W_comp"
+    with pytest.raises(ValueError, match=match):
+        load_measurements(
+            _write(tmp_path / "log.csv", rows, header),
+            {**COLUMNS, "X": target},
+            time_column="t",
+        )

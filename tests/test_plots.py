@@ -84,18 +84,93 @@ def test_sobol_heatmap_shows_intervals_and_never_clips_silently(tmp_path):
     save_figure(figure, tmp_path / "sobol_smoke")
 
 
-def test_a_uniform_prior_is_drawn_flat():
-    rng = np.random.default_rng(3)
-    tree = xr.DataTree.from_dict(
+def _uniform_tree(rng):
+    return xr.DataTree.from_dict(
         {
             "prior": xr.Dataset({"M0": (("chain", "draw"), rng.uniform(0.9, 2.2, (1, 300)))}),
             "posterior": xr.Dataset({"M0": (("chain", "draw"), rng.normal(1.5, 0.05, (1, 300)))}),
         }
     )
-    figure = plot_prior_posterior(tree, uniform={"M0": (0.9, 2.2)})
-    prior_line = next(line for line in figure.axes[0].lines if line.get_label() == "prior")
-    np.testing.assert_allclose(prior_line.get_xdata(), [0.9, 0.9, 2.2, 2.2])
-    np.testing.assert_allclose(prior_line.get_ydata()[1:3], 1.0 / 1.3)
+
+
+def test_a_uniform_prior_is_drawn_flat_by_arviz():
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.plots import labeller
+
+    tree = _uniform_tree(np.random.default_rng(3))
+    names = labeller(tree, [load_unit().parameters["M0"]])
+    figure = plot_prior_posterior(tree, uniform={"M0": (0.9, 2.2)}, truth={"M0": 1.5}, labels=names)
+    (ax,) = figure.axes
+    prior, posterior = (line for line in ax.lines if line.get_label() in ("prior", "posterior"))
+    x, y = prior.get_xdata(), prior.get_ydata()
+    assert (x.min(), x.max()) == (0.9, 2.2)
+    inside = (x > 0.9) & (x < 2.2)
+    np.testing.assert_allclose(y[inside], 1.0 / 1.3, rtol=0.01)  # flat within 1 %
+    assert y[0] == y[-1] == 0.0  # and falls to 0 at the bounds, not before
+    assert posterior.get_ydata().max() > 5 * y.max()
+    assert ax.get_title() == "Total refrigerant mass\n(kg)"
+    legend = [text.get_text() for text in ax.get_legend().get_texts()]
+    assert legend == ["prior", "posterior", "true value"]
+    assert any(np.allclose(line.get_xdata(), 1.5) for line in ax.lines)
+
+
+def test_a_kde_of_uniform_draws_would_not_be_flat():
+    figure = plot_prior_posterior(_uniform_tree(np.random.default_rng(3)))
+    prior = next(line for line in figure.axes[0].lines if line.get_label() == "prior")
+    y = prior.get_ydata()
+    assert np.ptp(y) / np.max(y) > 0.1  # what the exact density replaces
+
+
+def test_charge_posteriors_are_a_forest_with_one_row_per_dataset():
+    from pymc_vcc.plots import plot_charge_posteriors
+
+    rng = np.random.default_rng(4)
+    references = [1.5, 1.35, 1.2]
+    trees = [
+        xr.DataTree.from_dict(
+            {"posterior": xr.Dataset({"M0": (("chain", "draw"), rng.normal(r, 0.05, (1, n)))})}
+        )
+        for r, n in zip(references, [200, 150, 180], strict=True)
+    ]
+    figure = plot_charge_posteriors(trees, references)
+    labels, forest = figure.axes
+    rows = [text.get_text() for text in labels.texts]
+    assert rows == ["dataset 1: 1.5 kg", "dataset 2: 1.35 kg", "dataset 3: 1.2 kg"]
+    assert forest.get_xlabel() == "total refrigerant mass M0 (kg)"
+    marks = [line for line in forest.lines if line.get_marker() == "x"]
+    assert sorted(float(line.get_xdata()[0]) for line in marks) == sorted(references)
+    legend = [text.get_text() for text in forest.get_legend().get_texts()]
+    assert legend[1] == "reference charge"
+    with pytest.raises(ValueError, match="one reference per tree"):
+        plot_charge_posteriors(trees, references[:2])
+
+
+def test_predictive_figure_says_measured_and_units():
+    from pymc_vcc.plots import plot_predictive
+
+    rng = np.random.default_rng(5)
+    time = np.arange(4.0)
+    attrs = {"units": "Pa", "long_name": "Compressor discharge pressure"}
+    predictive = xr.Dataset(
+        {"PD": (("chain", "draw", "time"), 27e5 + 1e4 * rng.standard_normal((1, 50, 4)), attrs)},
+        coords={"time": time},
+        attrs={"noise": 0},
+    )
+    observed = xr.Dataset({"PD": ("time", np.full(4, 27e5), attrs)}, coords={"time": time})
+    tree = xr.DataTree.from_dict({"posterior_predictive": predictive, "observed_data": observed})
+    figure = plot_predictive(tree, calibration_end=2.0)
+    ax = figure.axes[0]
+    assert ax.get_title() == "Compressor discharge pressure"
+    assert ax.get_ylabel() == "PD (bar)"
+    (legend,) = figure.legends
+    legend = [text.get_text() for text in legend.get_texts()]
+    assert legend == [
+        "90 % band (noise-free)",
+        "predictive median",
+        "measured",
+        "end of calibration data",
+    ]
+    assert "truth" not in " ".join(legend)
 
 
 def test_arviz_labels_and_display_units():

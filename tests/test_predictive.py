@@ -66,6 +66,64 @@ def test_noise_scales_widen_the_bands(line_posterior):
     assert width_noisy.mean() > 1.5 * width_clean.mean()
 
 
+def test_sensor_noise_in_engineering_units_widens_the_bands(line_posterior):
+    from pymc_vcc.inference.noise import SensorNoise
+
+    line_posterior = posterior_tree(  # without the paper's ν
+        {name: line_posterior["posterior"][name].values for name in ("a", "b")}
+    )
+    sim = AsDataset(LinearGaussian(n_time=40, sigma=0.0))
+    settings = {"parameters": ["a", "b"], "seed": 7}
+    clean = simulate_predictive(line_posterior, sim, noise=False, executor="serial", **settings)
+    sensor = SensorNoise(kinds={"y": "temperature"}, temperature=0.5)  # 0.5 (K) absolute
+    noisy = simulate_predictive(
+        line_posterior, sim, sensor_noise=sensor, executor="serial", **settings
+    )
+    residual = noisy["posterior_predictive"]["y"] - clean["posterior_predictive"]["y"]
+    assert float(residual.std()) == pytest.approx(0.5, rel=0.05)
+    parallel = simulate_predictive(
+        line_posterior, sim, sensor_noise=sensor, executor="processes", **settings
+    )
+    xr.testing.assert_equal(
+        noisy["posterior_predictive"].to_dataset(), parallel["posterior_predictive"].to_dataset()
+    )
+    unchanged = simulate_predictive(
+        line_posterior, sim, sensor_noise=sensor, noise=False, executor="serial", **settings
+    )
+    xr.testing.assert_equal(
+        unchanged["posterior_predictive"].to_dataset(), clean["posterior_predictive"].to_dataset()
+    )
+
+
+def test_learned_sensor_noise_scales_are_used_draw_by_draw(line_posterior):
+    from pymc_vcc.inference.noise import SensorNoise
+
+    posterior = line_posterior["posterior"].to_dataset().drop_vars("nu_y")
+    scales = np.where(np.arange(60) < 30, 0.1, 2.0) * np.ones((2, 1))
+    learned = xr.DataTree.from_dict(
+        {"posterior": posterior.assign(sigma_y=(("chain", "draw"), scales))}
+    )
+    sim = AsDataset(LinearGaussian(n_time=200, sigma=0.0))
+    settings = {"parameters": ["a", "b"], "seed": 8, "executor": "serial"}
+    clean = simulate_predictive(learned, sim, noise=False, **settings)
+    sensor = SensorNoise(kinds={"y": "temperature"}, temperature=0.5)
+    noisy = simulate_predictive(learned, sim, sensor_noise=sensor, **settings)
+    residual = noisy["posterior_predictive"]["y"] - clean["posterior_predictive"]["y"]
+    spread = residual.std("time").values
+    np.testing.assert_allclose(spread[:, :30], 0.1, rtol=0.25)
+    np.testing.assert_allclose(spread[:, 30:], 2.0, rtol=0.25)
+
+
+def test_sensor_noise_needs_to_know_the_kind_of_each_output(line_posterior):
+    from pymc_vcc.inference.noise import SensorNoise
+
+    sim = AsDataset(LinearGaussian(n_time=20))
+    with pytest.raises(ValueError, match="output 'y' has units None; SensorNoise knows"):
+        simulate_predictive(
+            line_posterior, sim, sensor_noise=SensorNoise(), executor="serial", seed=1
+        )
+
+
 def test_failed_draws_are_nan_counted_and_left_out_of_the_bands(line_posterior):
     sim = Flaky(AsDataset(LinearGaussian(n_time=20)), rate=0.3)
     tree = simulate_predictive(

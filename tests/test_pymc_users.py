@@ -166,3 +166,34 @@ def test_chains_with_different_numbers_of_stages_are_padded():
     np.testing.assert_array_equal(stats["beta"], [[0.1, 0.4, 1.0], [0.2, 1.0, np.nan]])
     assert stats["simulations"].dims == ("chain", "stage")
     assert stats.attrs["n_simulations"] == 510
+
+
+def test_both_samplers_return_the_same_layout():
+    from pymc_vcc.inference.priors import UniformPrior
+    from pymc_vcc.inference.rejection import abc_rejection
+
+    observed = xr.Dataset(
+        {"y": ("time", OBSERVED[0], {"units": "K", "long_name": "a temperature"})},
+        coords={"time": ("time", np.arange(40.0), {"units": "s"})},
+    )
+    rejection = abc_rejection(
+        SIM, UniformPrior(SIM.bounds), observed, n_pilot=40, n_main=100, n_desired=10,
+        quantile=0.2, executor="serial", seed=1, progress=False,
+    )  # fmt: skip
+    with pm.Model():
+        add_simulator("y", SIM, observed, epsilon=0.3, distance=SIM.distance)
+        smc = sample_smc_abc(draws=20, executor="serial", random_seed=1, **QUIET)
+    data = [tree["observed_data"].to_dataset() for tree in (rejection, smc)]
+    for dataset in data:
+        dataset.attrs = {}  # the samplers' own metadata
+    xr.testing.assert_identical(*data)  # variables, units, long names, time
+    assert list(rejection["posterior"].data_vars) == list(smc["posterior"].data_vars) == ["mu"]
+    assert rejection["posterior"]["mu"].dims == smc["posterior"]["mu"].dims == ("chain", "draw")
+
+
+def test_pymcs_sample_posterior_predictive_is_not_shadowed():
+    import pymc_vcc
+
+    assert "simulate_predictive" in pymc_vcc.__all__
+    assert "sample_posterior_predictive" not in pymc_vcc.__all__
+    assert not hasattr(pymc_vcc, "sample_posterior_predictive")

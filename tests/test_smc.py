@@ -242,3 +242,43 @@ def test_charge_calibration_on_the_vcc_simulator_recovers_the_true_charge():
     # a work budget: the charge-observable physics of issue 13 gives a sharper likelihood,
     # hence more tempering stages (600 measured with it)
     assert idata.sample_stats.attrs["n_simulations"] < 800
+
+
+ON_A_TERMINAL = """
+import numpy as np, pymc as pm
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.testing import GaussianLocation
+
+sim = GaussianLocation(n_time=40)
+with pm.Model():
+    add_simulator("y", sim, sim({"mu": 0.3}, np.random.default_rng(4)), epsilon=0.5)
+    sample_smc_abc(draws=50, executor="serial", random_seed=1)
+"""
+
+
+def test_the_progress_bar_is_drawn_on_a_terminal(tmp_path):
+    import os
+    import pty
+    import subprocess
+    import sys
+
+    script = tmp_path / "run.py"
+    script.write_text(ON_A_TERMINAL)
+    main, terminal = pty.openpty()
+    run = subprocess.Popen(
+        [sys.executable, str(script)], stdout=terminal, stderr=terminal, cwd=tmp_path
+    )
+    os.close(terminal)
+    shown = b""
+    while True:
+        try:
+            chunk = os.read(main, 4096)
+        except OSError:  # the terminal closed: the run ended
+            break
+        if not chunk:
+            break
+        shown += chunk
+    assert run.wait(timeout=300) == 0
+    os.close(main)
+    assert b"Stage" in shown and b"Beta" in shown and b"\xe2\x94\x81" in shown  # "━": the bar

@@ -177,3 +177,13 @@ def test_the_smc_leak_study_shows_progress_on_a_terminal(monkeypatch):
     with pytest.raises(Called) as called:
         leak_study(StudySettings(budget="smoke", executor="serial"), sampler="smc")
     assert called.value.args == (True,)
+
+
+def test_validate_command_writes_where_told_and_counts_its_files(tmp_path, capsys):
+    out = tmp_path / "mine"
+    command = ["validate", "--budget", "smoke", "--datasets", "1", "--methods", "ks"]
+    assert main([*command, "--executor", "serial", "--out", str(out)]) == 0
+    written = sorted(path for path in out.rglob("*") if path.is_file())
+    assert {"comparison.txt", "summary.json", "runs.jsonl"} <= {path.name for path in written}
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last == f"results written to {out} ({len(written)} files)"

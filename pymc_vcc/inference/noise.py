@@ -193,26 +193,32 @@ class SensorNoise:
 
     def resolve(self, observed: ObservedData) -> OutputNoise:
         """The noise of each observed output, its kind told by its ``units`` attribute."""
+        return self.for_outputs(
+            {name: observed.dataset[name].attrs.get("units") for name in observed.names}
+        )
+
+    def for_outputs(self, units: Mapping[str, str | None]) -> OutputNoise:
+        """The noise of outputs named by ``units`` (output -> its SI units), in that order."""
         kinds, scales = [], []
-        for name in observed.names:
-            units = observed.dataset[name].attrs.get("units")
-            kind = self.kinds.get(name) or KIND_OF_UNITS.get(units)
+        names = tuple(units)
+        for name in names:
+            kind = self.kinds.get(name) or KIND_OF_UNITS.get(units[name] or "")
             if kind is None:
                 raise ValueError(
-                    f"output {name!r} has units {units!r}; SensorNoise knows "
+                    f"output {name!r} has units {units[name]!r}; SensorNoise knows "
                     f"{list(KIND_OF_UNITS)}: give SensorNoise(kinds={{{name!r}: ...}}) one of "
                     f"{list(KINDS)}"
                 )
             kinds.append(kind)
             scales.append(float(self.outputs.get(name, getattr(self, kind))))
-        unknown = [name for name in (*self.outputs, *self.kinds) if name not in observed.names]
+        unknown = [name for name in (*self.outputs, *self.kinds) if name not in names]
         if unknown:
             raise ValueError(
                 f"SensorNoise names outputs {unknown} that are not observed; the observed "
-                f"outputs are {list(observed.names)}"
+                f"outputs are {list(names)}"
             )
         return OutputNoise(
-            names=observed.names,
+            names=names,
             scales=tuple(scales),
             relative=tuple(kind in RELATIVE_KINDS for kind in kinds),
             correlation=float(self.correlation),

@@ -4,7 +4,9 @@ The paper's Figs. 6 and 8 show, for each output, the median and an interval of t
 simulated with posterior draws over the whole 2120 s profile, of which only the first 1060 s
 were used for calibration. :func:`simulate_predictive` runs those simulations in parallel
 (one random stream per draw from ``SeedSequence.spawn``, so the result does not depend on the
-executor) and returns the posterior's DataTree with ArviZ's standard groups:
+executor), with the output noise of data if asked (the paper's ν, or a
+:class:`~pymc_vcc.inference.noise.SensorNoise` in engineering units), and returns the
+posterior's DataTree with ArviZ's standard groups:
 
 ``posterior_predictive``
     one variable per output over (chain, draw, time), SI units and long names in its attrs;
@@ -29,7 +31,13 @@ import xarray as xr
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
 from pymc_vcc.execution.outcomes import run_simulation
-from pymc_vcc.inference.noise import add_output_noise, noise_parameter
+from pymc_vcc.inference.noise import (
+    OutputNoise,
+    SensorNoise,
+    add_output_noise,
+    noise_parameter,
+    sensor_parameter,
+)
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
 from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator
 
@@ -124,6 +132,7 @@ def simulate_predictive(
     outputs: Sequence[str] | None = None,
     reference: OutputData | None = None,
     noise: bool = True,
+    sensor_noise: SensorNoise | None = None,
     max_draws: int | None = None,
     executor: Executor | ExecutorKind = "processes",
     n_workers: int | None = None,
@@ -143,8 +152,12 @@ def simulate_predictive(
         outputs: outputs to predict (default: every output of the simulator or reference).
         reference: outputs observed (or true) on the same profile, stored as ``observed_data``
             (in place of the calibration data) for comparison.
-        noise: add the output noise Y + ν·|Y|·Z for outputs whose ``nu_<output>`` is in the
-            posterior (the predictive of data); False: predict the noise-free outputs.
+        noise: add the output noise (the predictive of data): the paper's Y + ν·|Y|·Z for
+            outputs whose ``nu_<output>`` is in the posterior, and ``sensor_noise`` if given;
+            False: predict the noise-free outputs (smooth bands).
+        sensor_noise: sensor noise in engineering units added to every draw (with
+            ``noise``), its kind per output told by the outputs' ``units``; a learnable
+            scale ``sigma_<output>`` in the posterior replaces the fixed scale draw by draw.
         max_draws: simulate at most this many posterior draws, evenly thinned (default: all).
         executor: an executor, or a kind (``"serial"``, ``"processes"``, ``"dask"``).
         n_workers: workers of an executor made here.
@@ -213,6 +226,18 @@ def simulate_predictive(
     for index, (simulated, *_rest) in enumerate(results):
         if simulated is not None:
             stacked[index] = simulated
+    if noise and sensor_noise is not None:
+        given = {name: var.attrs.get("units") for name, var in layout.dataset.data_vars.items()}
+        known = {name: units.get(name, {}).get("units") or given.get(name) for name in layout.names}
+        learned = np.column_stack(
+            [
+                posterior[sensor_parameter(name)].values.reshape(-1)
+                if sensor_parameter(name) in posterior.data_vars
+                else np.full(n_chains * n_draws, np.nan)
+                for name in layout.names
+            ]
+        )
+        _add_sensor_noise(stacked, sensor_noise.for_outputs(known), learned, seeds)
     stacked = stacked.reshape(n_chains, n_draws, len(layout.names), n_time)
     coords = {"chain": posterior["chain"].values, "draw": posterior["draw"].values, "time": time}
     predictive = xr.Dataset(
@@ -240,6 +265,23 @@ def simulate_predictive(
             observed[name].attrs = {**units.get(name, {}), **observed[name].attrs}
         tree["observed_data"] = xr.DataTree(observed)
     return tree
+
+
+def _add_sensor_noise(
+    stacked: np.ndarray,
+    noise: OutputNoise,
+    learned: np.ndarray,
+    seeds: Sequence[np.random.SeedSequence],
+) -> None:
+    """Add ``noise`` in place to each finished draw of ``stacked`` (draws, outputs, time), from
+    a stream spawned off the draw's seed; ``learned`` (draws, outputs) holds the calibrated
+    scales, NaN where the fixed scale applies."""
+    for index, seed in enumerate(seeds):
+        if np.isnan(stacked[index]).any():
+            continue
+        scales = np.where(np.isnan(learned[index]), noise.scales, learned[index])
+        rng = np.random.default_rng(seed.spawn(1)[0])
+        stacked[index] = noise.sample(stacked[index], rng, scales)
 
 
 def predictive_bands(tree: xr.DataTree, interval: float = 0.9) -> xr.Dataset:

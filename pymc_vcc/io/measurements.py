@@ -1,10 +1,12 @@
 """Measured data: CSV logs of a real unit as simulator inputs and observed outputs (SI).
 
 A log holds a time column (numbers in some time unit, or date-times in any common format),
-the four inputs and some or all of the nine outputs, in engineering units, sampled irregularly,
-with gaps. :func:`load_measurements` reads it with pandas, maps file columns to ids, converts
-to SI with pint (K, Pa absolute, kg/s, valve fraction, speed in rev/s = Hz), and resamples
-onto a regular grid of spacing ``dt`` (s, the unit's output interval):
+the four inputs (and optionally the indoor relative humidity ``RH_indoor``) and some or all
+of the nine outputs (and optionally the compressor's electrical power ``W_comp``), in
+engineering units, sampled irregularly, with gaps. :func:`load_measurements` reads it with
+pandas, maps file columns to ids, converts to SI with pint (K, Pa absolute, kg/s, W, valve
+and humidity fractions, speed in rev/s = Hz), and resamples onto a regular grid of spacing
+``dt`` (s, the unit's output interval):
 
 * units come from ``units=``, from the header (``TD [degC]`` or ``TD (F)``) or from a row of
   units right under the header; ``C`` and ``F`` mean °C and °F, a ``g`` suffix marks a gauge
@@ -49,8 +51,8 @@ import pint
 import xarray as xr
 
 from pymc_vcc.io.plausibility import check_plausible
-from pymc_vcc.physics.cycles import OUTPUT_IDS, OUTPUT_INFO
-from pymc_vcc.physics.inputs import INPUT_IDS, make_inputs
+from pymc_vcc.physics.cycles import MEASURABLE_OUTPUT_INFO
+from pymc_vcc.physics.inputs import CYCLE_INPUT_IDS, INPUT_IDS, make_inputs
 
 EXAMPLE_LOG = "example_log.csv"
 """File name of the example field log inside ``pymc_vcc/data``."""
@@ -67,6 +69,7 @@ _QUANTITY: dict[str, str] = {
     "compressor_speed": "speed",
     "T_ambient": "temperature",
     "T_indoor": "temperature",
+    "RH_indoor": "fraction",
     "TD": "temperature",
     "PD": "pressure",
     "TS": "temperature",
@@ -76,6 +79,7 @@ _QUANTITY: dict[str, str] = {
     "TE": "temperature",
     "PE": "pressure",
     "MDOT": "mass_flow",
+    "W_comp": "power",
 }
 """The physical quantity of every input and output id."""
 
@@ -85,6 +89,7 @@ _SI_UNIT = {
     "mass_flow": "kg/s",
     "fraction": "dimensionless",
     "speed": "Hz",
+    "power": "W",
 }
 _EXAMPLES = {
     "temperature": "K, degC, °C, C, degF, °F, F",
@@ -92,6 +97,7 @@ _EXAMPLES = {
     "mass_flow": "kg/s, g/s, kg/h, lb/min, lb/h",
     "fraction": "1, %",
     "speed": "Hz, rps, rpm, 1/min",
+    "power": "W, kW",
 }
 _ALIASES = {
     "temperature": {"C": "degC", "F": "degF"},
@@ -533,9 +539,11 @@ def load_measurements(
     Args:
         path: CSV file (``,``, ``;`` or tab separated) with a header row, optionally followed by
             a row of units.
-        columns: file column -> id, one for each of the four inputs (:data:`INPUT_IDS`) and at
-            least one output (:data:`~pymc_vcc.physics.cycles.OUTPUT_IDS`); other file columns are
-            ignored. A file column may be named with or without its header unit.
+        columns: file column -> id, one for each of the four inputs (:data:`INPUT_IDS`), at
+            most one for ``RH_indoor`` (fraction or %; default: dry air), and at least one output
+            of :data:`~pymc_vcc.physics.cycles.MEASURABLE_OUTPUT_INFO` (the nine, and ``W_comp``
+            in W or kW); other file columns are ignored. A file column may be named with or
+            without its header unit.
         units: file column -> unit (see :func:`unit_converter`); a column missing here carries
             its unit in its header (``"name [unit]"`` or ``"name (unit)"``) or in the units row.
         time_column: the file column of the timestamps: numbers in ``time_unit`` or date-times.
@@ -572,12 +580,12 @@ def load_measurements(
     if decimal not in (None, ".", ","):
         raise ValueError(f"decimal must be '.' or ',' (or None to infer it), got {decimal!r}")
     ids = list(columns.values())
-    known = set(INPUT_IDS) | set(OUTPUT_IDS)
+    known = set(CYCLE_INPUT_IDS) | set(MEASURABLE_OUTPUT_INFO)
     unknown = [name for name in ids if name not in known]
     if unknown:
         raise ValueError(
-            f"columns map to unknown id(s) {unknown}; allowed are {list(INPUT_IDS)} (inputs) "
-            f"and {list(OUTPUT_IDS)} (outputs)"
+            f"columns map to unknown id(s) {unknown}; allowed are {list(CYCLE_INPUT_IDS)} "
+            f"(inputs) and {list(MEASURABLE_OUTPUT_INFO)} (outputs)"
         )
     repeated = sorted({name for name in ids if ids.count(name) > 1})
     if repeated:
@@ -585,9 +593,10 @@ def load_measurements(
     missing_inputs = [name for name in INPUT_IDS if name not in ids]
     if missing_inputs:
         raise ValueError(f"columns must map a file column to every input; missing {missing_inputs}")
-    outputs = tuple(name for name in OUTPUT_IDS if name in ids)
+    inputs_read = tuple(name for name in CYCLE_INPUT_IDS if name in ids)
+    outputs = tuple(name for name in MEASURABLE_OUTPUT_INFO if name in ids)
     if not outputs:
-        raise ValueError(f"columns must map at least one output of {list(OUTPUT_IDS)}")
+        raise ValueError(f"columns must map at least one output of {list(MEASURABLE_OUTPUT_INFO)}")
 
     table, delimiter = _read_table(path)
     bare = {_split_header_unit(name)[0]: name for name in table.header}
@@ -649,10 +658,10 @@ def load_measurements(
         found = [g for n in names for g in _gaps(n, times[np.isfinite(raw[n])], max_gap)]
         return [gap for gap in found if (gap.start, gap.end) not in outages]
 
-    input_gaps = variable_gaps(INPUT_IDS)
+    input_gaps = variable_gaps(inputs_read)
     output_gaps = variable_gaps(outputs)
-    start = max(float(times[np.isfinite(raw[name])][0]) for name in INPUT_IDS)
-    end = min(float(times[np.isfinite(raw[name])][-1]) for name in INPUT_IDS)
+    start = max(float(times[np.isfinite(raw[name])][0]) for name in inputs_read)
+    end = min(float(times[np.isfinite(raw[name])][-1]) for name in inputs_read)
     pieces = [(a, b) for a, b in _segments(start, end, row_gaps + input_gaps) if b - a >= 2 * dt]
     if not pieces:
         raise ValueError(
@@ -673,7 +682,7 @@ def load_measurements(
 
     resampled_inputs = {
         name: _resample(times, raw[name], absolute, max_gap, stepped=name in STEPPED_INPUTS)
-        for name in INPUT_IDS
+        for name in inputs_read
     }
     try:
         inputs = _held_inputs(resampled_inputs, dt, input_hold)
@@ -695,7 +704,10 @@ def load_measurements(
             name: (
                 "time",
                 series[complete],
-                {"units": OUTPUT_INFO[name][1], "long_name": OUTPUT_INFO[name][0]},
+                {
+                    "units": MEASURABLE_OUTPUT_INFO[name][1],
+                    "long_name": MEASURABLE_OUTPUT_INFO[name][0],
+                },
             )
             for name, series in observed_values.items()
         },

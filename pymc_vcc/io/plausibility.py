@@ -12,12 +12,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from pymc_vcc.physics.cycles import OUTPUT_INFO
+from pymc_vcc.physics.cycles import MEASURABLE_OUTPUT_INFO
 
 PLAUSIBLE_SI: dict[str, tuple[float, float]] = {
     "Pa": (3e4, 7e6),  # refrigerant pressure: 0.3 to 70 bar absolute
     "K": (200.0, 450.0),  # refrigerant temperature: -73 to 177 °C
     "kg/s": (1e-4, 2.0),  # compressor mass flow: 0.1 g/s to 2 kg/s
+    "W": (10.0, 1e6),  # compressor electrical power: 10 W to 1 MW
 }
 """Range of the median of a measured output, by SI unit, that a vapor-compression cycle can
 reach (wide: it catches unit mistakes, which are off by factors of 10 to 10^5, not faults)."""
@@ -29,6 +30,7 @@ COMMON_UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "K": {"degC": (1.0, 273.15), "degF": (5 / 9, 273.15 - 160 / 9), "K": (1.0, 0.0)},
     "kg/s": {"g/s": (1e-3, 0.0), "kg/h": (1 / 3600, 0.0), "kg/min": (1 / 60, 0.0)}
     | {"lb/h": (0.45359237 / 3600, 0.0), "kg/s": (1.0, 0.0)},
+    "W": {"kW": (1e3, 0.0), "W": (1.0, 0.0)},
 }
 """Units a logger commonly writes, per SI unit, to name the likely one."""
 
@@ -56,9 +58,9 @@ def check_plausible(output: str, column: str, values_si: np.ndarray, declared_un
     Raises:
         ValueError: naming the column, its median and the likely unit.
     """
-    if output not in OUTPUT_INFO:
+    if output not in MEASURABLE_OUTPUT_INFO:
         return
-    si_unit = OUTPUT_INFO[output][1]
+    si_unit = MEASURABLE_OUTPUT_INFO[output][1]
     low, high = PLAUSIBLE_SI[si_unit]
     finite = np.asarray(values_si, dtype=float)
     finite = finite[np.isfinite(finite)]
@@ -78,8 +80,9 @@ def check_plausible(output: str, column: str, values_si: np.ndarray, declared_un
         ]
         if likely:
             hint = f"; the numbers look like {likely[0]}, not {declared_unit}"
+    long_name = MEASURABLE_OUTPUT_INFO[output][0].lower()
     raise ValueError(
-        f"column {column!r} ({output}, {OUTPUT_INFO[output][0].lower()}): median {median:.4g} "
+        f"column {column!r} ({output}, {long_name}): median {median:.4g} "
         f"{si_unit} is implausible (expected {low:g} to {high:g} {si_unit}){hint}; check its "
         "declared unit"
     )

@@ -6,8 +6,9 @@ from the first (system-to-system variability or slow drift). Each drives the mod
 all 26 parameters and the output-noise scales with a uniform prior, dataset 2 with the Gaussian
 mixture fitted to dataset 1's posterior (Algorithm 1). Posterior predictives cover the whole
 2120 s, without the output noise (their bands show what the parameters leave uncertain, not
-the jagged median of noisy draws), and dataset 2 is also simulated with dataset 1's true
-parameters (the uncalibrated model of Fig. 8).
+the jagged median of noisy draws), against the measured data (the reference runs, with the
+sensor noise if given), and dataset 2 is also simulated with dataset 1's true parameters (the
+uncalibrated model of Fig. 8).
 
 Two samplers (``method``): the paper's two-phase ABC rejection (Table I's budget), or PyMC's
 SMC-ABC on the same KS distance with a Gaussian kernel of width ε, all particles of a stage
@@ -34,7 +35,13 @@ from pymc_vcc.inference.sequential import SequentialResult, sequential_calibrati
 from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
 from pymc_vcc.physics.unit import Unit
-from pymc_vcc.plots import plot_inputs, plot_predictive, plot_prior_posterior, save_figure
+from pymc_vcc.plots import (
+    labeller,
+    plot_inputs,
+    plot_predictive,
+    plot_prior_posterior,
+    save_figure,
+)
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_netcdf
 
 SENSITIVE = ("M0", "CF_VOL", "CF_POW", "CF_PREF", "CF_LEV")
@@ -216,11 +223,11 @@ def estimation_study(
         except RuntimeError:
             if attempt == max_attempts - 1:
                 raise
-    observed = [ref.sel(time=slice(0.0, t_calibration)) for ref in references]
-    if sensor_noise is not None:
+    if sensor_noise is not None:  # measured over the whole profile, calibrated on its start
         sensor_noise = replace(sensor_noise, learnable=True)
         noise_rng = np.random.default_rng(draw_seed.spawn(1)[0])
-        observed = [sensor_noise.measure(data, noise_rng) for data in observed]
+        references = [sensor_noise.measure(data, noise_rng) for data in references]
+    observed = [ref.sel(time=slice(0.0, t_calibration)) for ref in references]
     calibration_model = VCCSimulator(unit, full.inputs, t_window=(0.0, t_calibration))
     prior = UniformPrior({spec.id: (spec.low, spec.high) for spec in unit.parameters})
     noise = None if sensor_noise else dict.fromkeys(OUTPUT_IDS, noise_bounds)
@@ -292,7 +299,6 @@ def _write(
     write_netcdf(result.calibration.to_datatree(), files[0])
     write_json(files[1], result.summary())
     files += save_figure(plot_inputs(inputs, calibration_end=t_calibration), out / "fig4_inputs")
-    long_names = {spec.id: spec.name for spec in unit.parameters}
     for k, (tree, truth) in enumerate(zip(result.predictive, result.truths, strict=True)):
         path = out / f"predictive_{k + 1}.nc"
         write_netcdf(tree, path)
@@ -302,7 +308,7 @@ def _write(
             tree,
             ordered,
             truth=truth,
-            long_names=long_names,
+            labels=labeller(tree, unit.parameters),
             uniform={spec.id: (spec.low, spec.high) for spec in unit.parameters}
             if k == 0
             else None,
@@ -312,7 +318,6 @@ def _write(
             tree,
             calibration_end=t_calibration,
             uncalibrated=result.uncalibrated if k == 1 else None,
-            reference_label="truth",
         )
         files += save_figure(ppd, out / f"fig{6 if k == 0 else 8}_predictive_dataset{k + 1}")
     return [str(path) for path in files]

@@ -11,7 +11,7 @@ For one reference charge, ``n_datasets`` measured datasets differ only in their 
 
 Reported per method: mean |posterior mean − truth|, median posterior sd, the fraction of 95 %
 intervals covering the truth, simulations per dataset and median wall time per dataset. Each
-finished calibration is appended to ``<out>/validate/runs.jsonl`` as it completes.
+finished calibration is appended to ``<out>/runs.jsonl`` as it completes.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
-from pymc_vcc.studies.common import StudySettings, write_json
+from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.leak import CHARGE, INTERVAL, calibrate_charge, reference_data
 
 METHODS: dict[str, tuple[str, bool, BatchDistance]] = {
@@ -83,6 +83,7 @@ class ValidationResult:
         return "\n".join(lines)
 
 
+@holds_output_folder("validate")
 def validation_study(
     settings: StudySettings | None = None,
     *,
@@ -107,7 +108,6 @@ def validation_study(
         smc_epsilon: kernel width of SMC-ABC methods.
     """
     started = time.perf_counter()
-    settings = settings or StudySettings()
     unknown = [name for name in methods if name not in METHODS]
     if unknown or not methods:
         raise ValueError(f"methods must be names of {list(METHODS)}, got {list(methods)}")
@@ -126,8 +126,8 @@ def validation_study(
     runs = []
     log = None
     if settings.out is not None:
-        (settings.out / "validate").mkdir(parents=True, exist_ok=True)
-        log = settings.out / "validate" / "runs.jsonl"
+        settings.out.mkdir(parents=True, exist_ok=True)
+        log = settings.out / "runs.jsonl"
         log.write_text("")
     with settings.open_executor() as executor:
         for dataset, seed in enumerate(settings.seeds(int(n_datasets))):
@@ -172,11 +172,10 @@ def validation_study(
     ]
     result = ValidationResult(float(reference_kg), rows, runs, time.perf_counter() - started)
     if settings.out is not None:
-        out = settings.out / "validate"
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "comparison.txt").write_text(result.format_table() + "\n")
-        write_json(out / "summary.json", result.summary())
-        result.files = [str(out / "comparison.txt"), str(out / "summary.json")]
+        write_text(settings.out / "comparison.txt", result.format_table() + "\n")
+        write_json(settings.out / "summary.json", result.summary())
+        result.files = [str(settings.out / name) for name in ("runs.jsonl", "comparison.txt")]
+        result.files.append(str(settings.out / "summary.json"))
     return result
 
 

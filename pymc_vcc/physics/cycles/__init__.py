@@ -11,7 +11,7 @@ from __future__ import annotations
 from pymc_vcc.physics.cycles.base import CycleModel, StateLayout
 from pymc_vcc.physics.cycles.heat_pump_heating import HeatPumpHeating
 from pymc_vcc.physics.cycles.split_cooling import SplitCooling
-from pymc_vcc.physics.cycles.split_unit import OUTPUT_INFO
+from pymc_vcc.physics.cycles.split_unit import DIAGNOSTIC_INFO, OPTIONAL_OUTPUT_IDS, OUTPUT_INFO
 
 CYCLE_MODELS: dict[str, CycleModel] = {
     model.name: model for model in (SplitCooling(), HeatPumpHeating())
@@ -21,6 +21,13 @@ CYCLE_MODELS: dict[str, CycleModel] = {
 OUTPUT_IDS: tuple[str, ...] = tuple(OUTPUT_INFO)
 """The nine model outputs of the paper, in order (every shipped cycle has them)."""
 
+MEASURABLE_OUTPUT_INFO: dict[str, tuple[str, str]] = {
+    **OUTPUT_INFO,
+    **{name: DIAGNOSTIC_INFO[name] for name in OPTIONAL_OUTPUT_IDS},
+}
+"""Outputs a simulator may return and a logger may measure -> (long name, SI unit): the nine,
+then the optional ones (``W_comp``)."""
+
 
 def cycle_model(name: str) -> CycleModel:
     """The cycle model called ``name``; ``ValueError`` naming the allowed ones otherwise."""
@@ -29,4 +36,12 @@ def cycle_model(name: str) -> CycleModel:
     return CYCLE_MODELS[name]
 
 
-__all__ = ["CYCLE_MODELS", "OUTPUT_IDS", "OUTPUT_INFO", "CycleModel", "StateLayout", "cycle_model"]
+__all__ = [
+    "CYCLE_MODELS",
+    "MEASURABLE_OUTPUT_INFO",
+    "OUTPUT_IDS",
+    "OUTPUT_INFO",
+    "CycleModel",
+    "StateLayout",
+    "cycle_model",
+]
