@@ -143,7 +143,7 @@ def test_one_result_layout_stages_totals_units_and_netcdf(tmp_path):
     stats = tree["sample_stats"].to_dataset()
     assert stats["beta"].dims == ("chain", "stage") and stats.sizes["chain"] == 2
     assert (stats["beta"].max("stage") == 1.0).all()
-    assert stats.attrs["n_simulations"] == int(stats["simulations"].sum()) > 2 * 3 * 30
+    assert stats["n_simulations"] == int(stats["simulations"].sum()) > 2 * 3 * 30
     observed_data = tree["observed_data"].to_dataset()
     assert list(observed_data.data_vars) == ["y"]
     assert observed_data["y"].attrs == {"units": "K", "long_name": "a temperature"}
@@ -165,7 +165,7 @@ def test_chains_with_different_numbers_of_stages_are_padded():
     )
     np.testing.assert_array_equal(stats["beta"], [[0.1, 0.4, 1.0], [0.2, 1.0, np.nan]])
     assert stats["simulations"].dims == ("chain", "stage")
-    assert stats.attrs["n_simulations"] == 510
+    assert stats["n_simulations"] == 510
 
 
 def test_both_samplers_return_the_same_layout():

@@ -130,7 +130,7 @@ def test_failed_simulations_are_restored_as_failures(tmp_path):
         again.sample_stats["failed_simulations"].values,
         first.sample_stats["failed_simulations"].values,
     )
-    assert first.sample_stats.attrs["n_failed_simulations"] > 0
+    assert first.sample_stats["n_failed"] > 0
     assert again.sample_stats.attrs["failure_kinds"] == first.sample_stats.attrs["failure_kinds"]
 
 

@@ -30,6 +30,7 @@ from pymc.smc.kernels import IMH
 
 from pymc_vcc.execution.executors import make_executor
 from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import ParallelIMH
 from pymc_vcc.inference.rejection import abc_rejection
@@ -187,7 +188,7 @@ def _accuracy(quick: bool) -> dict[str, float | int]:
         for epsilon, draws in ladder:
             errors, counts = [], []
             for seed, (observed, mean, sd) in zip(seeds, data, strict=True):
-                with pm.Model():
+                with pm.Model() as model:
                     add_simulator(
                         "y",
                         simulator,
@@ -205,7 +206,8 @@ def _accuracy(quick: bool) -> dict[str, float | int]:
                         compute_convergence_checks=False,
                     )
                 errors.append(_error(_draws(idata.posterior, names), mean, sd))
-                counts.append(int(idata.sample_stats.attrs["n_simulations"]))
+                stats = standard_layout(idata, model)["sample_stats"]
+                counts.append(int(stats["n_simulations"]))
             if np.mean(errors) <= rejection_error:
                 results[f"smc_{name}_error"] = float(np.mean(errors))
                 results[f"smc_{name}_simulations"] = int(np.mean(counts))

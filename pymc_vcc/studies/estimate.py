@@ -119,13 +119,6 @@ def _sd_ratio(tree: xr.DataTree, first_prior: Prior) -> dict[str, float]:
     }
 
 
-def _n_simulations(tree: xr.DataTree) -> int:
-    stats = tree["sample_stats"]
-    if "n_simulations" in stats:  # rejection
-        return int(stats["n_simulations"])
-    return int(stats["simulations"].sum() + stats["resumed_simulations"].sum())  # SMC
-
-
 def smc_sequential_calibration(
     simulator: VCCSimulator,
     first_prior: Prior,
@@ -278,7 +271,7 @@ def estimation_study(
         predictive=predictive,
         uncalibrated=uncalibrated,
         contraction=[_sd_ratio(tree, prior) for tree in calibration.trees],
-        n_simulations=sum(_n_simulations(tree) for tree in calibration.trees),
+        n_simulations=sum(int(tree["sample_stats"]["n_simulations"]) for tree in calibration.trees),
         wall_seconds=time.perf_counter() - started,
     )
     if settings.out is not None:

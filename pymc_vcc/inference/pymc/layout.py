@@ -10,8 +10,9 @@ of :func:`~pymc_vcc.inference.rejection.abc_rejection` and
 * ``observed_data``: one variable per output (named as the output; ``<node>_<output>`` when the
   model has several simulator nodes) over its ``time``, with ``units`` and ``long_name``;
 * ``sample_stats``: every stage statistic over ``(chain, stage)`` as numbers (NaN after the
-  last stage of a chain that had fewer), and the simulation counts in the attrs summed over
-  all chains.
+  last stage of a chain that had fewer), and the totals over all chains as 0-d variables named
+  as the rejection sampler's: ``n_simulations`` (run and resumed: what the posterior rests on),
+  ``n_failed`` and ``n_resumed``.
 """
 
 from __future__ import annotations
@@ -24,12 +25,13 @@ from pymc.model import Model
 from pymc_vcc.inference.pymc.model import SimulatorFunction
 from pymc_vcc.physics.cycles import OUTPUT_INFO
 
-COUNTS = {
-    "simulations": "n_simulations",
-    "failed_simulations": "n_failed_simulations",
-    "resumed_simulations": "n_resumed_simulations",
+TOTALS = {
+    "n_simulations": ("simulations", "resumed_simulations"),
+    "n_failed": ("failed_simulations",),
+    "n_resumed": ("resumed_simulations",),
 }
-"""Stage statistics that count simulations -> the attribute holding their total."""
+"""Total over all chains and stages -> the stage statistics it adds up (those present; the
+first must be)."""
 
 
 def _numbers(row: np.ndarray) -> np.ndarray:
@@ -71,9 +73,10 @@ def stage_statistics(sample_stats: xr.Dataset, n_chains: int | None = None) -> x
     if per_stage:
         result = result.assign_coords(stage=np.arange(result.sizes["stage"]))
         result["stage"].attrs["long_name"] = "SMC stage (tempering step)"
-    for stat, total in COUNTS.items():
-        if stat in result:
-            result.attrs[total] = int(np.nansum(result[stat].values))
+    for total, stats in TOTALS.items():
+        if stats[0] in result:
+            counts = [np.nansum(result[stat].values) for stat in stats if stat in result]
+            result[total] = ((), int(sum(counts)))
     return result
 
 
@@ -118,4 +121,4 @@ def standard_layout(tree: xr.DataTree, model: Model) -> xr.DataTree:
     return result
 
 
-__all__ = ["COUNTS", "observed_outputs", "stage_statistics", "standard_layout"]
+__all__ = ["TOTALS", "observed_outputs", "stage_statistics", "standard_layout"]

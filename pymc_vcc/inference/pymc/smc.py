@@ -264,11 +264,9 @@ class ParallelIMH(IMH):
         self._reset_counters()
 
     def _reset_counters(self) -> None:
-        """Zero the counts of a stage and the totals (over every chain this kernel runs)."""
+        """Zero the counts of a stage and the failure record (over every chain this kernel
+        runs)."""
         self._reset_stage_counters()
-        self.total_simulations = 0
-        self.total_failures = 0
-        self.total_resumed = 0
         self.failure_kinds: Counter[str] = Counter()
         self.failure_reasons: list[str] = []
 
@@ -356,9 +354,6 @@ class ParallelIMH(IMH):
         self._stage_simulations += len(todo)
         self._stage_resumed += resumed
         self._stage_failures += failures
-        self.total_simulations += len(todo)
-        self.total_resumed += resumed
-        self.total_failures += failures
         loglik[allowed] = self._likelihood.evaluate(
             batch,
             np.array([record.loglik for record in records]),
@@ -436,9 +431,6 @@ class ParallelIMH(IMH):
     def sample_settings(self) -> dict[str, int | float | str]:
         return {
             **super().sample_settings(),
-            "n_simulations": self.total_simulations,
-            "n_failed_simulations": self.total_failures,
-            "n_resumed_simulations": self.total_resumed,
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
             "failure_examples": " | ".join(self.failure_reasons),
             "median_log_likelihood": float(np.median(self.likelihood_logp)),
@@ -528,10 +520,11 @@ def sample_smc_abc(
         The DataTree of ``pm.sample_smc`` in the layout of
         :func:`~pymc_vcc.inference.pymc.layout.standard_layout`: ``posterior``,
         ``sample_stats`` over ``(chain, stage)`` (simulation counts and ESS per stage) with the
-        run summary in its attrs (``n_simulations`` over all chains, ``n_stages`` per chain,
-        ``epsilon`` per simulator node, ``min_stage_ess``), ``observed_data`` with one variable
-        per output. Warns (RuntimeWarning) when draws are fewer than the parameters, a stage's
-        ESS falls below 30 or the final distances sit far above ε.
+        run summary (``n_simulations``, ``n_failed`` and ``n_resumed`` over all chains,
+        ``n_stages`` per chain, ``epsilon`` per simulator node, ``min_stage_ess``),
+        ``observed_data`` with one variable per output. Warns (RuntimeWarning) when draws are
+        fewer than the parameters, a stage's ESS falls below 30 or the final distances sit far
+        above ε.
     """
     if int(chains) != chains or chains < 1:
         raise ValueError(f"chains must be a positive integer, got {chains}")
@@ -606,13 +599,10 @@ def _with_run_summary(tree: DataTree, model: Model) -> DataTree:
     above ε)."""
     stats = tree["sample_stats"].to_dataset()
     per_chain = _per_chain(stats["simulations"].values)
-    resumed = _per_chain(stats["resumed_simulations"].values)
     ess = np.concatenate(_per_chain(stats["ess"].values))
     nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
     epsilon = [float(getattr(rv.owner.op.epsilon, "data", rv.owner.op.epsilon)) for rv in nodes]
-    total = int(sum(row.sum() for row in per_chain) + sum(row.sum() for row in resumed))
     summary = {
-        "n_simulations": ((), total),
         "n_stages": ("chain", [row.size for row in per_chain]),
         "epsilon": ("simulator_node", epsilon),
         "min_stage_ess": ((), float(ess.min()) if ess.size else np.nan),
