@@ -1,5 +1,6 @@
 """The command line parses and reports its sub-commands."""
 
+import numpy as np
 import pytest
 
 from pymc_vcc.cli import build_parser, main
@@ -96,3 +97,12 @@ def test_noisy_data_options_parse():
     assert build_parser().parse_args(["estimate", "--sensor-noise", "typical"]).sensor_noise
     validate = build_parser().parse_args(["validate", "--datasets", "3", "--methods", "ks"])
     assert (validate.datasets, validate.methods, validate.reference) == (3, ["ks"], 1.5)
+
+
+def test_box_sweep_reports_throughput_per_cpu_second():
+    from pymc_vcc.benchmarks.simulator import _sweep
+    from pymc_vcc.physics.unit import load_unit
+
+    draws = load_unit().parameters.sample_uniform(2, np.random.default_rng(1))
+    figures = _sweep("cvode", draws, workers=1)
+    assert 0 < figures["sims_per_second"] <= figures["sims_per_cpu_second"] < 1e3

@@ -103,9 +103,9 @@ def test_solvers_agree_on_the_fig4_profile_at_nominal():
 
 @pytest.mark.slow
 def test_solvers_agree_over_box_draws():
-    """50 draws, 1060 s: both solve the same draws and agree to 3 % of each output's range on
-    every draw, 0.2 % on most. (Measured: 1.2e-2 at worst, where Radau is 1.2e-2 from an rtol
-    1e-7 reference and CVODE 1e-3; 1.1e-3 at the 90th percentile.)"""
+    """50 draws, 1060 s: both solve the same draws (one fails in both) and agree on every draw to
+    4 % of each output's largest magnitude, on 90 % of them to 0.1 %. (Measured: 1.9e-4 median,
+    4.9e-4 at the 90th percentile, 1.1e-3 on the second worst, 3.6e-2 on the worst, draw 33.)"""
     unit = load_unit()
     simulators = [
         VCCSimulator(unit, t_window=(0.0, 1060.0), solver=method, max_wall_time=600.0)
@@ -118,7 +118,9 @@ def test_solvers_agree_over_box_draws():
         if radau.attrs["status"] == "ok":
             differences.append(_difference(radau, cvode).max())
     assert len(differences) >= 45
-    # all draws but one within 3 %: with the physics of issue 13, draw 33 (M0 = 2.14 kg, low
-    # air flows) differs by 16 % in MDOT, and which solver is right there is open (issue 15)
-    assert sorted(differences)[-2] < 3e-2
-    assert np.quantile(differences, 0.8) < 2e-3
+    # draw 33 (M0 = 2.14 kg, low air flows): a fast transient starts by itself 43 s after the
+    # last input step (MDOT falls 25 % within 2 s); an rtol 1e-8 reference puts its onset at
+    # 403.40 s, CVODE at 403.41 s, Radau at the unit's tolerances at 403.55 s, which is 3.7 % of
+    # MDOT for a second or two; the trajectories then meet again
+    assert max(differences) < 4e-2
+    assert np.quantile(differences, 0.9) < 1e-3

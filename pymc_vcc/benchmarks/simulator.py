@@ -7,11 +7,14 @@ For each solver of :data:`~pymc_vcc.physics.solvers.METHODS` (``_<solver>`` suff
   process, after a warm-up run; its ``rhs_evals``, ``jac_evals`` and ``solver_steps`` (-1: CVODE
   does not report them);
 * ``sims_per_second`` and ``failure_rate``: 1060 s simulations of uniform draws from the Table
-  III box on all cores (a process pool), with the failure kinds counted.
+  III box on all cores (a process pool), with the failure kinds counted, and
+  ``sims_per_cpu_second`` (draws over the CPU time the workers spent on them: what one idle core
+  would do, whatever else the machine runs).
 
 Then ``speedup_<solver>`` (Radau's median over the solver's), ``parallel_speedup_<fastest>`` (the
-box sweep on all cores over the same sweep on one), and, unsuffixed as before, the unit's
-default solver's figures.
+box sweep on all cores over the same sweep on one; meaningful only on an otherwise idle
+machine, so ``load_average`` (1 min, at the start) is reported beside it), and, unsuffixed as
+before, the unit's default solver's figures.
 """
 
 from __future__ import annotations
@@ -38,10 +41,13 @@ def _init_worker(solver: str) -> None:
     _simulator = VCCSimulator(t_window=T_WINDOW, solver=solver)
 
 
-def _run_draw(theta: dict[str, float]) -> str:
-    """The draw's failure kind (:class:`~pymc_vcc.physics.failures.FailureKind`), "" if ok."""
+def _run_draw(theta: dict[str, float]) -> tuple[str, float]:
+    """The draw's failure kind (:class:`~pymc_vcc.physics.failures.FailureKind`, "" if ok) and
+    the CPU time it took, s."""
     assert _simulator is not None
-    return _simulator(theta, None).attrs["failure_kind"]
+    start = time.process_time()
+    kind = _simulator(theta, None).attrs["failure_kind"]
+    return kind, time.process_time() - start
 
 
 def _nominal(solver: str, repeats: int) -> dict[str, float | int]:
@@ -74,9 +80,10 @@ def _sweep(solver: str, draws: list[dict[str, float]], workers: int) -> dict[str
     with context.Pool(workers, initializer=_init_worker, initargs=(solver,)) as pool:
         outcomes = pool.map(_run_draw, draws, chunksize=1)
     elapsed = time.perf_counter() - start
-    reasons = Counter(kind for kind in outcomes if kind)
+    reasons = Counter(kind for kind, _ in outcomes if kind)
     return {
         "sims_per_second": len(draws) / elapsed,
+        "sims_per_cpu_second": len(draws) / sum(cpu for _, cpu in outcomes),
         "failure_rate": sum(reasons.values()) / len(draws),
         "failure_reasons": "; ".join(f"{count} x {kind}" for kind, count in reasons.items()),
     }
@@ -88,7 +95,11 @@ def run(quick: bool) -> dict[str, float | int | str]:
     n_draws = 20 if quick else 200
     draws = unit.parameters.sample_uniform(n_draws, np.random.default_rng(12345))
     workers = os.cpu_count() or 1
-    results: dict[str, float | int | str] = {"box_draws": n_draws, "workers": workers}
+    results: dict[str, float | int | str] = {
+        "box_draws": n_draws,
+        "workers": workers,
+        "load_average": os.getloadavg()[0],
+    }
     per_solver = {}
     for solver in METHODS:
         figures = _nominal(solver, 5 if quick else 7) | _sweep(solver, draws, workers)
@@ -111,6 +122,7 @@ SIDE_BY_SIDE = (
     "jac_evals",
     "solver_steps",
     "sims_per_second",
+    "sims_per_cpu_second",
     "failure_rate",
     "speedup",
 )

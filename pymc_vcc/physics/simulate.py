@@ -19,6 +19,7 @@ import numpy as np
 import xarray as xr
 from threadpoolctl import ThreadpoolController
 
+from pymc_vcc.physics.binding import bind
 from pymc_vcc.physics.cycles.base import CycleModel
 from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.inputs import (
@@ -192,9 +193,11 @@ def simulate(
 
 def _integrate(model, y, c, tables, edges, held, times, states, solver, deadline):
     """Fill ``states`` on ``times`` segment by segment; return the :class:`Failure` or None."""
-    evaluate, jacobian = model.evaluate, model.jacobian
     dydt = np.empty(y.size)
     out = np.empty(model.n_eval)
+    # every segment and both solvers pass arrays of these same types
+    evaluate = bind(model.evaluate, y, held[0], c, tables, dydt, out)
+    jacobian = bind(model.jacobian, y, held[0], c, tables, dydt)
     for k, u in enumerate(held):
         t0, t1 = float(edges[k]), float(edges[k + 1])
         last = k == len(held) - 1

@@ -86,6 +86,7 @@ class StateLayout:
         self.size = offset
         self.zones = np.array(zones, dtype=np.int64).reshape(-1, 2)
         """Per zone: (offset of its pressure, number of cells); cells follow the pressure."""
+        self.zones.flags.writeable = False  # cycle modules share one layout per size
         self.n_cells = int(self.zones[:, 1].sum())
         self.dtype = np.dtype(
             [(name, np.int64) for name in names]

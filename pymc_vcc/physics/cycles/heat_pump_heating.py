@@ -20,6 +20,7 @@ there is no latent load: the indoor relative humidity is read but changes nothin
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import TYPE_CHECKING
 
@@ -68,8 +69,10 @@ if TYPE_CHECKING:
 N_EVAL = len(OUTPUT_INFO) + len(DIAGNOSTIC_INFO)
 
 
+@functools.cache
 def layout(n_volumes: int) -> StateLayout:
-    """The state: two zones (pressure, then cell enthalpies in flow order), walls, integral."""
+    """The state: two zones (pressure, then cell enthalpies in flow order), walls, integral;
+    one shared layout per size (see :func:`~.split_unit.split_unit_dtype`)."""
     return StateLayout(
         [
             Block("p_cond", 1, BlockKind.PRESSURE),

@@ -14,6 +14,7 @@ suction, so PS = PE - Δp), liquid line (in series with the valve).
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import TYPE_CHECKING
 
@@ -64,8 +65,10 @@ if TYPE_CHECKING:
 N_EVAL = len(OUTPUT_INFO) + len(DIAGNOSTIC_INFO)
 
 
+@functools.cache
 def layout(n_volumes: int) -> StateLayout:
-    """The state: two zones (pressure, then cell enthalpies in flow order), walls, integral."""
+    """The state: two zones (pressure, then cell enthalpies in flow order), walls, integral;
+    one shared layout per size (see :func:`~.split_unit.split_unit_dtype`)."""
     return StateLayout(
         [
             Block("p_cond", 1, BlockKind.PRESSURE),
