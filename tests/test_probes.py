@@ -12,6 +12,7 @@ from pymc_vcc.physics.probes import (
     box_probe,
     charge_observability,
     noise_sd,
+    rated_inputs,
     separation,
 )
 from pymc_vcc.physics.simulate import simulate
@@ -41,7 +42,15 @@ def test_a_dozen_box_draws_hold_every_law(unit):
     reports = box_probe(12, seed=7, unit=unit)
     failed = [r for r in reports if not r.holds]
     assert not failed, failed
-    assert all(r.oscillation < 1e-3 and r.mass_error < 5e-4 for r in reports)
+    assert all(r.oscillation < 1e-3 and r.mass_error < 1e-4 for r in reports)
+
+
+def test_charge_held_through_a_violent_start_up(unit):
+    """The box draw whose start-up lost most charge with the C¹ density fillet (3.5e-4 at
+    12 s, as a condenser cell stepped through the bubble-line band) holds it to 1e-4."""
+    theta = unit.parameters.sample_uniform(65, np.random.default_rng(0))[64]
+    run = simulate(unit, theta, rated_inputs(unit, 60.0), diagnostics=True)
+    assert run.attrs["status"] == "ok" and run.attrs["mass_error"] < 1e-4
 
 
 def test_charge_stays_observable_when_the_tank_fills(unit):

@@ -10,6 +10,7 @@ from numba import njit
 from pymc_vcc.physics.refrigerant import (
     SUPPORTED_FLUIDS,
     TableResolution,
+    density_h_derivatives,
     entropy,
     h_from_ps,
     h_from_pT,
@@ -261,6 +262,23 @@ def test_derivatives_are_continuous_across_table_nodes(fluids):
     below = np.array(fluid.props(p, h_nodes - 1e-6)[:4])
     above = np.array(fluid.props(p, h_nodes + 1e-6)[:4])
     np.testing.assert_allclose(below, above, rtol=1e-6)
+
+
+@pytest.mark.parametrize("name", FLUIDS)
+def test_density_h_derivatives_are_the_state_and_its_slope(fluids, name):
+    """ρ and ∂ρ/∂h as ``state`` gives them; ∂²ρ/∂h² the central difference of its ∂ρ/∂h, in
+    both single phases and under the dome."""
+    tables = fluids[name].tables
+    for p in (8e5, 20e5):
+        _, h_l, h_v, _, _ = saturation_state(tables, p)
+        for x in (-0.12, -0.08, 0.08, 0.5, 0.92, 1.08, 1.4):
+            h = h_l + x * (h_v - h_l)
+            rho, slope, curvature = density_h_derivatives(tables, p, h)
+            _, rho_state, _, slope_state, _ = state(tables, p, h)
+            assert (rho, slope) == pytest.approx((rho_state, slope_state), rel=1e-12)
+            difference = (state(tables, p, h + 1.0)[3] - state(tables, p, h - 1.0)[3]) / 2.0
+            assert curvature == pytest.approx(difference, rel=1e-4)
+    assert np.isnan(density_h_derivatives(tables, 0.1 * fluids[name].p_min, 4e5)).all()
 
 
 def test_out_of_range_inputs_raise_clear_errors(fluids):

@@ -23,6 +23,7 @@ from scipy.signal import lfilter
 
 from pymc_vcc.inference.priors import Prior, UniformPrior
 from pymc_vcc.inference.series import ObservedData, prepare_observed
+from pymc_vcc.physics.sensors import KIND_OF_UNITS, RELATIVE_KINDS, TYPICAL_NOISE
 
 NOISE_PREFIX = "nu_"
 
@@ -101,19 +102,8 @@ def extended_prior(prior: Prior, bounds: Mapping[str, tuple[float, float]]) -> P
 
 # --- sensor noise in engineering units -------------------------------------------------------
 
-KIND_OF_UNITS: dict[str, str] = {
-    "K": "temperature",
-    "Pa": "pressure",
-    "kg/s": "mass_flow",
-    "W": "power",
-}
-"""Output kind of each SI unit: how a SensorNoise tells which scale applies to an output."""
-
-RELATIVE_KINDS = frozenset({"pressure", "mass_flow", "power"})
-"""Kinds whose scale is a fraction of the reading; temperature scales are absolute (K)."""
-
 SENSOR_PREFIX = "sigma_"
-KINDS: tuple[str, ...] = ("temperature", "pressure", "mass_flow", "power")
+KINDS: tuple[str, ...] = tuple(TYPICAL_NOISE)
 
 
 def is_noise_parameter(name: str) -> bool:
@@ -156,10 +146,10 @@ class SensorNoise:
         prior_factor: a learnable scale's prior is Uniform(scale / f, scale · f), f > 1.
     """
 
-    temperature: float = 0.3
-    pressure: float = 0.005
-    mass_flow: float = 0.01
-    power: float = 0.01
+    temperature: float = TYPICAL_NOISE["temperature"]
+    pressure: float = TYPICAL_NOISE["pressure"]
+    mass_flow: float = TYPICAL_NOISE["mass_flow"]
+    power: float = TYPICAL_NOISE["power"]
     outputs: Mapping[str, float] = field(default_factory=dict)
     kinds: Mapping[str, str] = field(default_factory=dict)
     correlation: float = 0.0

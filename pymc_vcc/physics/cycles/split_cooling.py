@@ -52,6 +52,7 @@ from pymc_vcc.physics.cycles.split_unit import (
     SRC_EPS,
     coil_cell_heat,
     coil_friction_density,
+    filled_coils,
     flow_through_drops,
     lumped_drops,
     split_unit_constants,
@@ -347,31 +348,11 @@ def total_mass(y, constants, tables):
 
 @njit(cache=True, error_model="numpy")
 def filled_state(s, p_c, p_e, constants, tables):
-    """A running-cycle state at pressures p_c, p_e whose charge grows monotonically with the fill
-    level ``s`` in [-1, 2]: s < 0 leaves the condenser outlet and liquid line two-phase (up to
-    quality 0.3), s in [0, 1] moves the end of condensation from the outlet to a fifth of the
-    coil, s > 1 fills the suction tank with liquid. Walls start at the fluid temperature."""
+    """:func:`~.split_unit.filled_coils` at fill level ``s``, the vapour line (low side)
+    superheated."""
     at = constants[0].layout
-    n = at.h_liquid_line - at.h_cond
-    y = np.zeros(at.size)
-    x_end = -0.08 + 0.38 * max(-s, 0.0)
-    reach = 1.0 - 0.8 * min(max(s, 0.0), 1.0)
-    y[at.p_cond] = p_c
-    for i in range(n):
-        xi = (i + 0.5) / n
-        x = max(1.05 - (1.05 - x_end) * xi / reach, x_end)
-        y[at.h_cond + i] = quality_enthalpy(tables, p_c, x)
-        y[at.Tw_cond + i] = state(tables, p_c, y[at.h_cond + i])[0]
-    y[at.h_liquid_line] = quality_enthalpy(tables, p_c, x_end)
-    y[at.p_evap] = p_e
-    sat_e = saturation_state(tables, p_e)
-    x_in = (y[at.h_liquid_line] - sat_e[1]) / (sat_e[2] - sat_e[1])
-    for i in range(n):
-        xi = (i + 0.5) / n
-        y[at.h_evap + i] = quality_enthalpy(tables, p_e, x_in + (1.05 - x_in) * xi)
-        y[at.Tw_evap + i] = state(tables, p_e, y[at.h_evap + i])[0]
+    y = filled_coils(s, p_c, p_e, at, tables)
     y[at.h_vapor_line] = quality_enthalpy(tables, p_e, 1.05)
-    y[at.h_tank] = quality_enthalpy(tables, p_e, 1.05 - 1.1 * min(max(s - 1.0, 0.0), 1.0))
     return y
 
 

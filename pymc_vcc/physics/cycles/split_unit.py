@@ -6,7 +6,7 @@ the coils by their function in the cycle's mode (``[condenser]``, ``[evaporator]
 fans by where they sit (``[outdoor_fan]``, ``[indoor_fan]``); :func:`split_unit_constants`
 turns it and a Table III vector into one record whose fields the cycle modules read by name.
 The kernels both modes share (suction tank outlet, compressor flow through the lumped pressure
-drops, a coil cell's wall heat) are here too.
+drops, a coil cell's wall heat, the start-up fill profile) are here too.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pymc_vcc.physics.components.fan import air_capacity_rate, fan_operating_poi
 from pymc_vcc.physics.components.heat_transfer import cell_heat
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
-from pymc_vcc.physics.cycles.base import StateLayout
+from pymc_vcc.physics.cycles.base import StateLayout, quality_enthalpy
 from pymc_vcc.physics.parameters import TABLE_III
 from pymc_vcc.physics.records import record_array
 from pymc_vcc.physics.refrigerant import saturation_state, state
@@ -72,6 +72,7 @@ SRC_EPS = 1e-5  # kg/s, sign of the charge-controller source
 DP_REG = 2e4  # Pa, valve square root
 TANK_WIDTH = 2e3  # J/kg, tank outlet smooth max
 DP_ITERATIONS = 4  # secant steps for the flow through the lumped pressure drops
+FILL_OUTLET_QUALITY = -0.15  # condenser outlet and liquid line at start-up, fill level >= 0
 
 OUTPUT_INFO: dict[str, tuple[str, str]] = {
     "TD": ("Compressor discharge temperature", "K"),
@@ -345,3 +346,33 @@ def coil_friction_density(rho, n):
     for i in range(n):
         volume += 1.0 / rho[i]
     return n / volume
+
+
+@njit(cache=True, error_model="numpy")
+def filled_coils(s, p_c, p_e, at, tables):
+    """A running-cycle state at pressures p_c, p_e (Pa), all but the vapour line, whose charge
+    grows monotonically with the fill level ``s`` in [-1, 2]: s < 0 leaves the condenser outlet
+    and liquid line two-phase (up to quality 0.3), s in [0, 1] moves the end of condensation
+    from the outlet to a fifth of the coil, s > 1 fills the suction tank with liquid. Walls
+    start at the fluid temperature; ``at`` is the layout record (the vapour line is the cycle
+    module's: its zone differs between the modes)."""
+    n = at.h_liquid_line - at.h_cond
+    y = np.zeros(at.size)
+    x_end = FILL_OUTLET_QUALITY + 0.45 * max(-s, 0.0)
+    reach = 1.0 - 0.8 * min(max(s, 0.0), 1.0)
+    y[at.p_cond] = p_c
+    for i in range(n):
+        xi = (i + 0.5) / n
+        x = max(1.05 - (1.05 - x_end) * xi / reach, x_end)
+        y[at.h_cond + i] = quality_enthalpy(tables, p_c, x)
+        y[at.Tw_cond + i] = state(tables, p_c, y[at.h_cond + i])[0]
+    y[at.h_liquid_line] = quality_enthalpy(tables, p_c, x_end)
+    y[at.p_evap] = p_e
+    sat_e = saturation_state(tables, p_e)
+    x_in = (y[at.h_liquid_line] - sat_e[1]) / (sat_e[2] - sat_e[1])
+    for i in range(n):
+        xi = (i + 0.5) / n
+        y[at.h_evap + i] = quality_enthalpy(tables, p_e, x_in + (1.05 - x_in) * xi)
+        y[at.Tw_evap + i] = state(tables, p_e, y[at.h_evap + i])[0]
+    y[at.h_tank] = quality_enthalpy(tables, p_e, 1.05 - 1.1 * min(max(s - 1.0, 0.0), 1.0))
+    return y

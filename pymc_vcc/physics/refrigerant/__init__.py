@@ -14,6 +14,7 @@ from pymc_vcc.physics.refrigerant.fluid import (
     load_refrigerant,
 )
 from pymc_vcc.physics.refrigerant.kernels import (
+    density_h_derivatives,
     enthalpy_bounds,
     entropy,
     h_from_ps,
@@ -34,6 +35,7 @@ __all__ = [
     "Refrigerant",
     "Saturation",
     "TableResolution",
+    "density_h_derivatives",
     "enthalpy_bounds",
     "entropy",
     "h_from_pT",

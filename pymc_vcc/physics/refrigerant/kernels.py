@@ -69,6 +69,12 @@ def _hermite_basis(t: float) -> tuple[float, float, float, float, float, float, 
 
 
 @njit(cache=True)
+def _hermite_second(t: float) -> tuple[float, float, float, float]:
+    """Second derivatives in t of the cubic Hermite basis h00, h10, h01, h11."""
+    return 12.0 * t - 6.0, 6.0 * t - 4.0, 6.0 - 12.0 * t, 6.0 * t - 2.0
+
+
+@njit(cache=True)
 def _sat_locate(tables: PropertyTables, p: float) -> tuple[int, float, float]:
     """Interval, width and local coordinate of p on the saturation nodes."""
     i = _interval(tables.sat_p, p)
@@ -121,6 +127,33 @@ def _bicubic(
             d_p += dhp * hx * f + dgp * hx * f_p + dhp * gx * f_x + dgp * gx * f_px
             d_xi += hp * dhx * f + gp * dhx * f_p + hp * dgx * f_x + gp * dgx * f_px
     return value, d_p, d_xi
+
+
+@njit(cache=True)
+def _bicubic_xi(
+    table: np.ndarray, k: int, i: int, j: int, dp: float, dxi: float, t: float, r: float
+) -> tuple[float, float, float]:
+    """Property k of a single-phase table: value, d/dxi and d²/dxi² at constant p."""
+    a00, a10, a01, a11, _, _, _, _ = _hermite_basis(t)
+    b00, b10, b01, b11, db00, db10, db01, db11 = _hermite_basis(r)
+    e00, e10, e01, e11 = _hermite_second(r)
+    value = 0.0
+    d_xi = 0.0
+    d_xixi = 0.0
+    for corner_p in range(2):
+        hp, gp = (a00, a10 * dp) if corner_p == 0 else (a01, a11 * dp)
+        for corner_xi in range(2):
+            if corner_xi == 0:
+                hx, gx, dhx, dgx, ehx, egx = b00, b10 * dxi, db00 / dxi, db10, e00, e10
+            else:
+                hx, gx, dhx, dgx, ehx, egx = b01, b11 * dxi, db01 / dxi, db11, e01, e11
+            node = table[i + corner_p, j + corner_xi, k]
+            along = hp * node[VALUE] + gp * node[D_P]  # value and xi-slope at this xi node
+            slope = hp * node[D_XI] + gp * node[D_P_XI]
+            value += hx * along + gx * slope
+            d_xi += dhx * along + dgx * slope
+            d_xixi += (ehx * along / dxi + egx * slope) / dxi
+    return value, d_xi, d_xixi
 
 
 @njit(cache=True)
@@ -196,6 +229,34 @@ def state(tables: PropertyTables, p: float, h: float) -> tuple[float, float, flo
     v_p = v_l_p + x * (v_v_p - v_l_p) + (v_v - v_l) * x_p
     v_h = (v_v - v_l) / dh
     return T_b + x * (T_d - T_b), rho, -rho * rho * v_p, -rho * rho * v_h, x
+
+
+@njit(cache=True)
+def density_h_derivatives(tables: PropertyTables, p: float, h: float) -> tuple[float, float, float]:
+    """(ρ, ∂ρ/∂h, ∂²ρ/∂h²) at constant p: kg/m³, (kg/m³)/(J/kg), (kg/m³)/(J/kg)².
+
+    Single phase from the bicubic table; two-phase, v is linear in h, so ∂²ρ/∂h² =
+    2 (∂ρ/∂h)² / ρ. NaNs outside the tables.
+    """
+    if not _in_range(tables, p):
+        return NAN, NAN, NAN
+    i, width, t = _sat_locate(tables, p)
+    h_min, _ = _sat_curve(tables, H_MIN, i, width, t)
+    h_max, _ = _sat_curve(tables, H_MAX, i, width, t)
+    if not (h >= h_min and h <= h_max):
+        return NAN, NAN, NAN
+    h_l, _ = _sat_curve(tables, H_LIQ, i, width, t)
+    h_v, _ = _sat_curve(tables, H_VAP, i, width, t)
+    if h < h_l or h > h_v:
+        table, ip, jx, dp, dxi, tp, rx, w, _ = _region(tables, p, h, i, width, t, h < h_l)
+        rho, rho_xi, rho_xixi = _bicubic_xi(table, PROP_RHO, ip, jx, dp, dxi, tp, rx)
+        return rho, rho_xi / w, rho_xixi / (w * w)
+    rho_l, _ = _sat_curve(tables, RHO_LIQ, i, width, t)
+    rho_v, _ = _sat_curve(tables, RHO_VAP, i, width, t)
+    v_h = (1.0 / rho_v - 1.0 / rho_l) / (h_v - h_l)
+    rho = 1.0 / (1.0 / rho_l + (h - h_l) * v_h)
+    drho_dh = -rho * rho * v_h
+    return rho, drho_dh, 2.0 * drho_dh * drho_dh / rho
 
 
 @njit(cache=True)
