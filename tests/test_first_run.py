@@ -45,3 +45,39 @@ def test_the_first_run_with_an_empty_cache_passes_and_matches_a_warm_one(tmp_pat
     warm = simulate(t_end=100.0)
     for name in warm.data_vars:
         np.testing.assert_array_equal(first[name].values, warm[name].values)
+
+
+STALE_CACHE = textwrap.dedent(
+    """
+    import sys
+    from pathlib import Path
+    from pymc_vcc.physics import warmup
+    from pymc_vcc.physics.components.smooth import smooth_pos
+
+    smooth_pos(1.0, 0.1)  # compiled and cached
+    index = Path(smooth_pos._cache._cache_file._index_path)
+    stamp = Path(sys.argv[1])
+    assert index.exists()
+    assert warmup.drop_stale_cache(stamp), "no digest recorded yet: the cache counts as stale"
+    assert not index.exists() and stamp.read_text() == warmup.source_digest()
+    smooth_pos(1, 1)  # a new signature compiles and is cached again
+    assert index.exists()
+    assert not warmup.drop_stale_cache(stamp), "same sources: the cache is kept"
+    assert index.exists()
+    stamp.write_text("the digest of other sources")
+    assert warmup.drop_stale_cache(stamp) and not index.exists()
+    """
+)
+
+
+def test_kernels_cached_from_other_sources_are_compiled_afresh(tmp_path):
+    """Numba checks a cached kernel against its own file only; the digest of the whole physics
+    package catches an edit to a kernel it calls in another file."""
+    run = subprocess.run(
+        [sys.executable, "-c", STALE_CACHE, str(tmp_path / "stamp")],
+        env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr

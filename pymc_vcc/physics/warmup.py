@@ -7,10 +7,16 @@ None of it is part of a simulation: :func:`ensure_compiled` does it all ahead of
 a wall-clock or sampler time limit never counts it and a run's result never depends on whether
 the caches were warm. A compile (no cached code yet) that takes long is announced on standard
 error, in the main process only (worker processes load the code it cached).
+
+Numba checks a cached kernel against its own source file only: after an edit, a branch switch or
+a ``git pull`` that changes a kernel it calls in another file, it would load stale machine code
+and silently compute the old physics. :func:`drop_stale_cache` guards against that with one
+digest of every source file of the physics package.
 """
 
 from __future__ import annotations
 
+import hashlib
 import multiprocessing
 import sys
 import threading
@@ -19,6 +25,7 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
+from numba.core.dispatcher import Dispatcher
 
 from pymc_vcc.physics.cycles import CycleModel
 from pymc_vcc.physics.inputs import INPUT_IDS, constant_inputs, input_segments
@@ -30,6 +37,15 @@ ANNOUNCE_AFTER_SECONDS = 2.0
 TYPICAL_COMPILE_SECONDS = 40
 """CPU time of a cold compile of the cycle model, s (37 s measured; the wall time grows with
 the machine's load: 62 to 500 s on a shared 2-core machine)."""
+
+PHYSICS_SOURCES = Path(__file__).parent
+"""Every cached Numba kernel of the package is defined below this folder..."""
+
+PHYSICS_PACKAGE = __name__.rpartition(".")[0]
+"""... in the modules of this package."""
+
+STAMP_NAME = "pymc_vcc-physics-sources.digest"
+"""File beside the cycle's cached kernels: the digest of the sources they were compiled from."""
 
 _READY: set[tuple[str, str, int]] = set()  # (cycle, refrigerant, cells per heat exchanger)
 
@@ -50,6 +66,50 @@ def _is_cached(model: CycleModel) -> bool:
         return Path(kernel._cache._cache_file._index_path).exists()
     except AttributeError:  # Numba internals changed: assume a compile
         return False
+
+
+def source_digest() -> str:
+    """Digest of every Python source file of the physics package (hex)."""
+    digest = hashlib.blake2b(digest_size=16)
+    for path in sorted(PHYSICS_SOURCES.rglob("*.py")):
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _loaded_cache_indexes() -> list[Path]:
+    """The disk-cache index files of every cached kernel in the loaded physics modules."""
+    indexes = set()
+    for name, module in list(sys.modules.items()):
+        if not name.startswith(PHYSICS_PACKAGE) or module is None:
+            continue
+        for value in vars(module).values():
+            cache_file = getattr(getattr(value, "_cache", None), "_cache_file", None)
+            if isinstance(value, Dispatcher) and cache_file is not None:
+                indexes.add(Path(cache_file._index_path))
+    return sorted(indexes)
+
+
+def drop_stale_cache(stamp: Path) -> bool:
+    """Delete the disk-cache index of every loaded physics kernel, so that it compiles afresh,
+    when the sources differ from the digest ``stamp`` records (or there is none); then record
+    the current digest. Returns whether it dropped the cache."""
+    digest = source_digest()
+    if stamp.exists() and stamp.read_text() == digest:
+        return False
+    for index in _loaded_cache_indexes():
+        index.unlink(missing_ok=True)
+    stamp.parent.mkdir(parents=True, exist_ok=True)
+    stamp.write_text(digest)
+    return True
+
+
+def _stamp(model: CycleModel) -> Path | None:
+    """Where the digest of the sources of ``model``'s cached kernels is kept."""
+    kernel: Any = model.evaluate  # a Numba dispatcher
+    try:
+        return Path(kernel._cache._cache_path) / STAMP_NAME
+    except AttributeError:  # Numba internals changed: no guard
+        return None
 
 
 def _run_kernels(unit: Unit) -> None:
@@ -77,8 +137,12 @@ def ensure_compiled(unit: Unit) -> None:
         return
     timer = threading.Timer(ANNOUNCE_AFTER_SECONDS, _announce)
     timer.daemon = True
-    if multiprocessing.parent_process() is None and not _is_cached(unit.cycle_model):
-        timer.start()
+    if multiprocessing.parent_process() is None:  # workers load what the main process cached
+        stamp = _stamp(unit.cycle_model)
+        if stamp is not None:
+            drop_stale_cache(stamp)
+        if not _is_cached(unit.cycle_model):
+            timer.start()
     try:
         _run_kernels(unit)
     finally:
