@@ -67,6 +67,7 @@ def _leak(args: argparse.Namespace) -> int:
         alarm_fraction=args.alarm_fraction,
         sensor_noise=_sensor_noise(args),
         inputs=inputs,
+        reference_table=args.reference_table,
         **window,
     )
     text = (
@@ -136,9 +137,10 @@ def _validate(args: argparse.Namespace) -> int:
         reference_kg=args.reference,
         n_datasets=args.datasets,
         methods=args.methods,
+        reference_table=args.reference_table,
     )
     text = f"{result.format_table()}\n\n{result.wall_seconds:.0f} s"
-    return _report(args, text, result.summary(), result.files)
+    return _report(args, text, result.summary())
 
 
 def _sobol(args: argparse.Namespace) -> int:
@@ -256,6 +258,15 @@ def _add_sensor_noise_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_reference_table_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--reference-table",
+        action="store_true",
+        help="rejection: simulate the budget's prior draws once and calibrate every dataset on "
+        "that shared table (each adds its own sensor noise); counted once, as shared",
+    )
+
+
 def _add_leak_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method",
@@ -287,6 +298,7 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
         default=0.9,
         help="leak alarm: P(M0 < fraction × first reference charge) (default 0.9)",
     )
+    _add_reference_table_option(parser)
 
 
 def _add_validate_options(parser: argparse.ArgumentParser) -> None:
@@ -302,6 +314,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         help="methods compared on the same noisy datasets (default: ks ks-noise windowed "
         "likelihood)",
     )
+    _add_reference_table_option(parser)
 
 
 def build_parser() -> argparse.ArgumentParser:
