@@ -68,6 +68,7 @@ def _leak(args: argparse.Namespace) -> int:
         sensor_noise=_sensor_noise(args),
         inputs=inputs,
         reference_table=args.reference_table,
+        smc_draws=args.particles,
         **window,
     )
     text = (
@@ -138,6 +139,7 @@ def _validate(args: argparse.Namespace) -> int:
         n_datasets=args.datasets,
         methods=args.methods,
         reference_table=args.reference_table,
+        smc_draws=args.particles,
     )
     text = f"{result.format_table()}\n\n{result.wall_seconds:.0f} s"
     return _report(args, text, result.summary())
@@ -258,7 +260,12 @@ def _add_sensor_noise_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_reference_table_option(parser: argparse.ArgumentParser) -> None:
+def _add_shared_sampler_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--particles",
+        type=_positive(int),
+        help="smc and likelihood: SMC particles per dataset (default: the budget's)",
+    )
     parser.add_argument(
         "--reference-table",
         action="store_true",
@@ -298,7 +305,7 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
         default=0.9,
         help="leak alarm: P(M0 < fraction × first reference charge) (default 0.9)",
     )
-    _add_reference_table_option(parser)
+    _add_shared_sampler_options(parser)
 
 
 def _add_validate_options(parser: argparse.ArgumentParser) -> None:
@@ -314,7 +321,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         help="methods compared on the same noisy datasets (default: ks ks-noise windowed "
         "likelihood)",
     )
-    _add_reference_table_option(parser)
+    _add_shared_sampler_options(parser)
 
 
 def build_parser() -> argparse.ArgumentParser:

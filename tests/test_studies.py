@@ -205,3 +205,16 @@ def test_validate_command_compares_methods_on_a_shared_table(tmp_path, capsys):
     assert summary["table_simulations"] == 48
     assert [row["method"] for row in summary["rows"]] == ["ks", "ks-noise"]
     assert all(row["datasets"] == 2 for row in summary["rows"])
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_the_likelihood_leak_study_takes_its_particle_count():
+    result = leak_study(
+        StudySettings(budget="smoke", executor="serial"),
+        references_kg=(1.5,),
+        sampler="likelihood",
+        sensor_noise=SensorNoise.typical(),
+        t_calibration=20.0,
+        smc_draws=12,
+    )
+    assert result.trees[0]["posterior"]["M0"].size == 12  # the smoke budget's is 8

@@ -140,12 +140,14 @@ def calibrate_charge(
     sensor_noise: SensorNoise | None,
     distance: BatchDistance,
     table: ReferenceTable | None = None,
+    smc_draws: int | None = None,
 ) -> tuple[xr.DataTree, int]:
     """The posterior of the charge on one dataset, and the simulations it took.
 
     ``sensor_noise`` is the noise the sampler accounts for (None: none, as the paper);
     ``checkpoint_name`` names its checkpoint under ``settings.out``. With a ``table``, rejection
     runs on its rows (see :func:`shared_table`) and the count is the rows this dataset used.
+    ``smc_draws``: SMC particles (default: the budget's ``smc_draws``).
     """
     if sampler == "rejection" and table is not None:
         work = settings.work
@@ -194,7 +196,7 @@ def calibrate_charge(
                 time_limit_s=settings.time_limit,
             )
         tree = sample_smc_abc(
-            settings.work.smc_draws,
+            smc_draws or settings.work.smc_draws,
             executor=executor,
             random_seed=int(seed.generate_state(1)[0]),
             checkpoint=settings.checkpoint(checkpoint_name),
@@ -247,6 +249,7 @@ def leak_study(
     sensor_noise: SensorNoise | None = None,
     distance: BatchDistance = ks_distances,
     reference_table: bool = False,
+    smc_draws: int | None = None,
 ) -> LeakResult:
     """Calibrate the charge M0 on one simulated dataset per reference charge (Table II).
 
@@ -266,6 +269,7 @@ def leak_study(
         reference_table: rejection only: simulate the budget's draws once and calibrate every
             dataset on that shared table (:mod:`pymc_vcc.inference.reference_table`); the
             study's simulation count is then the table's size.
+        smc_draws: particles of the SMC samplers (default: the budget's ``smc_draws``).
     """
     started = time.perf_counter()
     if sampler not in SAMPLERS:
@@ -314,6 +318,7 @@ def leak_study(
                 sensor_noise,
                 distance,
                 table,
+                smc_draws,
             )
             draws = tree["posterior"][CHARGE].values.ravel()
             if draws.size < 2:

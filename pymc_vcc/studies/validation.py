@@ -117,6 +117,7 @@ def validation_study(
     t_calibration: float = 1060.0,
     smc_epsilon: float = 0.02,
     reference_table: bool = False,
+    smc_draws: int | None = None,
 ) -> ValidationResult:
     """Calibrate the charge on ``n_datasets`` noisy datasets with each method (see module).
 
@@ -129,6 +130,7 @@ def validation_study(
         unit, inputs, t_calibration: the unit, its input profile and calibration window.
         smc_epsilon: kernel width of SMC-ABC methods.
         reference_table: the rejection methods share one table of prior simulations (module).
+        smc_draws: particles of the likelihood path (default: the budget's ``smc_draws``).
     """
     started = time.perf_counter()
     settings = settings or StudySettings()
@@ -181,6 +183,7 @@ def validation_study(
                     sensor_noise if aware else None,
                     distance,
                     table,
+                    smc_draws,
                 )
                 draws = tree["posterior"][CHARGE].values.ravel()
                 low, high = np.quantile(draws, [(1 - INTERVAL) / 2, (1 + INTERVAL) / 2])
