@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pymc_vcc.execution.store import CheckpointMismatchError
+from pymc_vcc.execution.store import CheckpointDamagedError, CheckpointMismatchError
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.reference_table import simulate_table, table_rejection
@@ -101,3 +101,19 @@ def test_a_checkpointed_table_resumes_without_simulating(tmp_path, monkeypatch):
 def test_observed_data_off_the_tables_grid_are_refused():
     with pytest.raises(ValueError, match="differ from the table's"):
         table_rejection(table(1), SensorProblem(n_time=30).dataset(1.5), quantile=0.2, n_desired=5)
+
+
+def test_a_damaged_chunk_and_noise_scales_in_the_prior_are_refused(tmp_path):
+    folder = tmp_path / "table"
+    table(2, checkpoint=folder)
+    next(folder.glob("chunk-*.npz")).write_bytes(b"not a chunk")
+    with pytest.raises(CheckpointDamagedError, match=r"chunk-.*damaged"):
+        table(2, checkpoint=folder)
+    with pytest.raises(ValueError, match=r"noise scales \['sigma_TD'\]"):
+        simulate_table(
+            PROBLEM,
+            PRIOR.extended({"sigma_TD": (0.1, 1.0)}),
+            PROBLEM.dataset(1.5),
+            executor="serial",
+            **SIZES,
+        )

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import time
+import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,9 +34,9 @@ from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, ex
 from pymc_vcc.execution.outcomes import OK, crash_outcome, run_simulation
 from pymc_vcc.execution.output_folder import atomic_path
 from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
-from pymc_vcc.execution.store import CheckpointMismatchError
+from pymc_vcc.execution.store import CheckpointDamagedError, CheckpointMismatchError
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
-from pymc_vcc.inference.noise import SensorNoise
+from pymc_vcc.inference.noise import SensorNoise, is_noise_parameter
 from pymc_vcc.inference.priors import Prior, check_prior_support
 from pymc_vcc.inference.rejection import (
     MAIN,
@@ -146,16 +147,21 @@ class _TableCheckpoint:
     def load(self) -> list[tuple]:
         """Every stored simulation: (phase, index, values or None, status, reason, elapsed)."""
         rows = []
+        fields = ("phase", "index", "values", "status", "reason", "elapsed")
         for path in sorted(self.folder.glob("chunk-*.npz")):
-            with np.load(path) as chunk:
-                fields = ("phase", "index", "values", "status", "reason", "elapsed")
-                for phase, index, values, status, reason, elapsed in zip(
-                    *(chunk[name] for name in fields), strict=True
-                ):
-                    kept = values if str(status) == OK else None
-                    rows.append(
-                        (int(phase), int(index), kept, str(status), str(reason), float(elapsed))
-                    )
+            try:
+                with np.load(path) as chunk:
+                    columns = [chunk[name] for name in fields]
+            except (OSError, ValueError, KeyError, zipfile.BadZipFile) as error:
+                raise CheckpointDamagedError(
+                    f"reference-table chunk {path} is damaged ({error}); delete it to simulate "
+                    "its rows again"
+                ) from None
+            for phase, index, values, status, reason, elapsed in zip(*columns, strict=True):
+                kept = values if str(status) == OK else None
+                rows.append(
+                    (int(phase), int(index), kept, str(status), str(reason), float(elapsed))
+                )
         return rows
 
     def append(self, rows: list[tuple], shape: tuple[int, int]) -> None:
@@ -204,6 +210,12 @@ def simulate_table(
     for name, value in (("n_pilot", n_pilot), ("n_main", n_main)):
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    noise_scales = [name for name in prior.names if is_noise_parameter(name)]
+    if noise_scales:
+        raise ValueError(
+            f"a reference table is noise-free: the prior holds noise scales {noise_scales}; "
+            "give the model parameters only and the sensor noise to table_rejection"
+        )
     info = check_simulator(simulator)
     data = _prepare_observed(info, observed, None)
     check_prior_support(info.support, prior.bounds)
