@@ -218,3 +218,17 @@ def test_the_likelihood_leak_study_takes_its_particle_count():
         smc_draws=12,
     )
     assert result.trees[0]["posterior"]["M0"].size == 12  # the smoke budget's is 8
+
+
+def test_the_validation_study_simulates_with_the_settings_solver(monkeypatch):
+    from pymc_vcc.studies import validation
+
+    class Stop(Exception):
+        pass
+
+    def capture(unit, *args, **kwargs):
+        raise Stop(unit.solver.method)
+
+    monkeypatch.setattr(validation, "VCCSimulator", capture)
+    with pytest.raises(Stop, match="cvode"):
+        validation.validation_study(StudySettings(solver="cvode"), methods=["ks"])
