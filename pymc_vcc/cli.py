@@ -67,6 +67,8 @@ def _leak(args: argparse.Namespace) -> int:
         alarm_fraction=args.alarm_fraction,
         sensor_noise=_sensor_noise(args),
         inputs=inputs,
+        reference_table=args.reference_table,
+        smc_draws=args.particles,
         **window,
     )
     text = (
@@ -136,6 +138,8 @@ def _validate(args: argparse.Namespace) -> int:
         reference_kg=args.reference,
         n_datasets=args.datasets,
         methods=args.methods,
+        reference_table=args.reference_table,
+        smc_draws=args.particles,
     )
     text = f"{result.format_table()}\n\n{result.wall_seconds:.0f} s"
     return _report(args, text, result.summary())
@@ -256,6 +260,20 @@ def _add_sensor_noise_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_shared_sampler_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--particles",
+        type=_positive(int),
+        help="smc and likelihood: SMC particles per dataset (default: the budget's)",
+    )
+    parser.add_argument(
+        "--reference-table",
+        action="store_true",
+        help="rejection: simulate the budget's prior draws once and calibrate every dataset on "
+        "that shared table (each adds its own sensor noise); counted once, as shared",
+    )
+
+
 def _add_leak_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method",
@@ -287,6 +305,7 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
         default=0.9,
         help="leak alarm: P(M0 < fraction × first reference charge) (default 0.9)",
     )
+    _add_shared_sampler_options(parser)
 
 
 def _add_validate_options(parser: argparse.ArgumentParser) -> None:
@@ -302,6 +321,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         help="methods compared on the same noisy datasets (default: ks ks-noise windowed "
         "likelihood)",
     )
+    _add_shared_sampler_options(parser)
 
 
 def build_parser() -> argparse.ArgumentParser:

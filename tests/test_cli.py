@@ -97,6 +97,9 @@ def test_noisy_data_options_parse():
     assert build_parser().parse_args(["estimate", "--sensor-noise", "typical"]).sensor_noise
     validate = build_parser().parse_args(["validate", "--datasets", "3", "--methods", "ks"])
     assert (validate.datasets, validate.methods, validate.reference) == (3, ["ks"], 1.5)
+    assert (validate.particles, validate.reference_table) == (None, False)
+    shared = build_parser().parse_args(["leak", "--particles", "32", "--reference-table"])
+    assert (shared.particles, shared.reference_table) == (32, True)
 
 
 def test_box_sweep_reports_throughput_per_cpu_second():

@@ -13,6 +13,7 @@ import pytest
 import xarray as xr
 
 from pymc_vcc.cli import main
+from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.studies import StudySettings, leak_study
 from pymc_vcc.studies.leak import leak_alarm
 
@@ -187,3 +188,57 @@ def test_validate_command_writes_where_told_and_counts_its_files(tmp_path, capsy
     assert {"comparison.txt", "summary.json", "runs.jsonl"} <= {path.name for path in written}
     last = capsys.readouterr().out.strip().splitlines()[-1]
     assert last == f"results written to {out} ({len(written)} files)"
+
+
+def test_a_shared_reference_table_serves_every_leak_dataset():
+    settings = StudySettings(budget="smoke", executor="serial")
+    options = {
+        "references_kg": (2.0, 1.2),
+        "t_calibration": 100.0,
+        "sensor_noise": SensorNoise.typical(),
+    }
+    shared = leak_study(settings, reference_table=True, **options)
+    alone = leak_study(settings, **options)
+    assert shared.shared_table and shared.n_simulations == 16 + 32  # the table, once
+    # the table is drawn with the first dataset's seed: that dataset's result is unchanged
+    assert shared.table[0] == alone.table[0]
+    assert shared.table[1]["n_simulations"] <= 48
+
+
+def test_validate_command_compares_methods_on_a_shared_table(tmp_path, capsys):
+    out = tmp_path / "validate"
+    arguments = ["validate", "--budget", "smoke", "--solver", "cvode", "--datasets", "2"]
+    main([*arguments, "--methods", "ks", "ks-noise", "--reference-table", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert "one shared table of 48 simulations" in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["table_simulations"] == 48
+    assert [row["method"] for row in summary["rows"]] == ["ks", "ks-noise"]
+    assert all(row["datasets"] == 2 for row in summary["rows"])
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_the_likelihood_leak_study_takes_its_particle_count():
+    result = leak_study(
+        StudySettings(budget="smoke", executor="serial"),
+        references_kg=(1.5,),
+        sampler="likelihood",
+        sensor_noise=SensorNoise.typical(),
+        t_calibration=20.0,
+        smc_draws=12,
+    )
+    assert result.trees[0]["posterior"]["M0"].size == 12  # the smoke budget's is 8
+
+
+def test_the_validation_study_simulates_with_the_settings_solver(monkeypatch):
+    from pymc_vcc.studies import validation
+
+    class Stop(Exception):
+        pass
+
+    def capture(unit, *args, **kwargs):
+        raise Stop(unit.solver.method)
+
+    monkeypatch.setattr(validation, "VCCSimulator", capture)
+    with pytest.raises(Stop, match="cvode"):
+        validation.validation_study(StudySettings(solver="cvode"), methods=["ks"])

@@ -29,6 +29,7 @@ from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.inference.reference_table import ReferenceTable, simulate_table, table_rejection
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit
@@ -60,6 +61,8 @@ class LeakResult:
             checkpoints).
         wall_seconds: wall time of the whole study, s.
         alarm_threshold_kg: charge below which the alarm counts a leak, kg.
+        shared_table: whether the datasets shared one reference table (then
+            ``n_simulations`` is its size and each row's count the table rows it used).
     """
 
     table: list[dict[str, float]]
@@ -68,6 +71,7 @@ class LeakResult:
     n_simulations: int
     wall_seconds: float
     alarm_threshold_kg: float
+    shared_table: bool = False
     files: list[str] = field(default_factory=list)
 
     def summary(self) -> dict:
@@ -78,6 +82,7 @@ class LeakResult:
             "wall_seconds": round(self.wall_seconds, 2),
             "sampler": self.sampler,
             "alarm_threshold_kg": self.alarm_threshold_kg,
+            "shared_table": self.shared_table,
         }
 
     def format_table(self) -> str:
@@ -134,12 +139,28 @@ def calibrate_charge(
     epsilon: float,
     sensor_noise: SensorNoise | None,
     distance: BatchDistance,
+    table: ReferenceTable | None = None,
+    smc_draws: int | None = None,
 ) -> tuple[xr.DataTree, int]:
     """The posterior of the charge on one dataset, and the simulations it took.
 
     ``sensor_noise`` is the noise the sampler accounts for (None: none, as the paper);
-    ``checkpoint_name`` names its checkpoint under ``settings.out``.
+    ``checkpoint_name`` names its checkpoint under ``settings.out``. With a ``table``, rejection
+    runs on its rows (see :func:`shared_table`) and the count is the rows this dataset used.
+    ``smc_draws``: SMC particles (default: the budget's ``smc_draws``).
     """
+    if sampler == "rejection" and table is not None:
+        work = settings.work
+        tree = table_rejection(
+            table,
+            observed,
+            quantile=work.quantile,
+            n_desired=work.n_desired,
+            sensor_noise=sensor_noise,
+            distance=distance,
+            seed=seed,
+        )
+        return tree, int(tree["sample_stats"]["n_simulations"])
     if sampler == "rejection":
         tree = abc_rejection(
             simulator,
@@ -175,7 +196,7 @@ def calibrate_charge(
                 time_limit_s=settings.time_limit,
             )
         tree = sample_smc_abc(
-            settings.work.smc_draws,
+            smc_draws or settings.work.smc_draws,
             executor=executor,
             random_seed=int(seed.generate_state(1)[0]),
             checkpoint=settings.checkpoint(checkpoint_name),
@@ -183,6 +204,35 @@ def calibrate_charge(
         )
     stats = tree["sample_stats"]
     return tree, int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
+
+
+def shared_table(
+    simulator: VCCSimulator,
+    prior: UniformPrior,
+    template: xr.Dataset,
+    settings: StudySettings,
+    executor,
+    seed: np.random.SeedSequence,
+    name: str,
+) -> ReferenceTable:
+    """One reference table of the budget's pilot and main draws, shared by every dataset.
+
+    Drawn with ``seed`` (the studies pass the first dataset's, whose result then equals a run
+    without the table); checkpointed in the folder ``name`` under ``settings.out``.
+    """
+    work = settings.work
+    return simulate_table(
+        simulator,
+        prior,
+        template,
+        n_pilot=work.n_pilot,
+        n_main=work.n_main,
+        executor=executor,
+        checkpoint=settings.checkpoint_folder(name),
+        seed=seed,
+        time_limit=settings.time_limit,
+        progress=settings.progress,
+    )
 
 
 @holds_output_folder("leak")
@@ -198,6 +248,8 @@ def leak_study(
     smc_epsilon: float = 0.02,
     sensor_noise: SensorNoise | None = None,
     distance: BatchDistance = ks_distances,
+    reference_table: bool = False,
+    smc_draws: int | None = None,
 ) -> LeakResult:
     """Calibrate the charge M0 on one simulated dataset per reference charge (Table II).
 
@@ -214,6 +266,10 @@ def leak_study(
         sensor_noise: noise of the sensors: added to the reference data (with the dataset's
             seed) and accounted for by the sampler; None: noise-free data (the paper).
         distance: the ABC samplers' batch distance (default: the paper's KS distance).
+        reference_table: rejection only: simulate the budget's draws once and calibrate every
+            dataset on that shared table (:mod:`pymc_vcc.inference.reference_table`); the
+            study's simulation count is then the table's size.
+        smc_draws: particles of the SMC samplers (default: the budget's ``smc_draws``).
     """
     started = time.perf_counter()
     if sampler not in SAMPLERS:
@@ -239,10 +295,16 @@ def leak_study(
 
     trees, rows, n_simulations = [], [], 0
     seeds = settings.seeds(len(references_kg))
+    table = None
     with settings.open_executor() as executor:
         for stage, (reference, seed) in enumerate(zip(references_kg, seeds, strict=True)):
             noise_rng = np.random.default_rng(seed.spawn(1)[0])
             observed = reference_data(simulator, reference, sensor_noise, noise_rng)
+            if reference_table and sampler == "rejection" and table is None:
+                table = shared_table(
+                    simulator, prior, observed, settings, executor, seeds[0], "leak_table"
+                )
+                n_simulations = table.n_simulations
             tree, ran = calibrate_charge(
                 sampler,
                 simulator,
@@ -255,6 +317,8 @@ def leak_study(
                 smc_epsilon,
                 sensor_noise,
                 distance,
+                table,
+                smc_draws,
             )
             draws = tree["posterior"][CHARGE].values.ravel()
             if draws.size < 2:
@@ -276,10 +340,16 @@ def leak_study(
                 }
             )
             trees.append(tree)
-            n_simulations += ran
+            n_simulations += ran if table is None else 0
 
     result = LeakResult(
-        rows, trees, sampler, n_simulations, time.perf_counter() - started, threshold
+        rows,
+        trees,
+        sampler,
+        n_simulations,
+        time.perf_counter() - started,
+        threshold,
+        shared_table=table is not None,
     )
     if settings.out is not None:
         result.files = _write(result, settings)

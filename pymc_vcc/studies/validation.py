@@ -12,6 +12,12 @@ For one reference charge, ``n_datasets`` measured datasets differ only in their 
 Reported per method: mean |posterior mean − truth|, median posterior sd, the fraction of 95 %
 intervals covering the truth, simulations per dataset and median wall time per dataset. Each
 finished calibration is appended to ``<out>/runs.jsonl`` as it completes.
+
+With ``reference_table`` the rejection methods share one table of the budget's prior draws
+(simulated once, drawn with the first dataset's seed; :mod:`pymc_vcc.inference.reference_table`):
+each dataset and method adds its own noise to the stored simulations. Their rows then report the
+table rows a dataset used, and :attr:`ValidationResult.table_simulations` the table's size,
+simulated once for all of them.
 """
 
 from __future__ import annotations
@@ -34,9 +40,15 @@ from pymc_vcc.inference.distances import (
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.physics.simulate import VCCSimulator
-from pymc_vcc.physics.unit import Unit, load_unit
+from pymc_vcc.physics.unit import Unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
-from pymc_vcc.studies.leak import CHARGE, INTERVAL, calibrate_charge, reference_data
+from pymc_vcc.studies.leak import (
+    CHARGE,
+    INTERVAL,
+    calibrate_charge,
+    reference_data,
+    shared_table,
+)
 
 METHODS: dict[str, tuple[str, bool, BatchDistance]] = {
     "ks": ("rejection", False, ks_distances),
@@ -50,12 +62,16 @@ METHODS: dict[str, tuple[str, bool, BatchDistance]] = {
 
 @dataclass
 class ValidationResult:
-    """Per method, one row of summary figures; per method and dataset, the raw figures."""
+    """Per method, one row of summary figures; per method and dataset, the raw figures.
+
+    ``table_simulations``: size of the reference table the rejection methods shared (0: none).
+    """
 
     reference_kg: float
     rows: list[dict[str, float | str]]
     runs: list[dict[str, float | str | bool]]
     wall_seconds: float
+    table_simulations: int = 0
     files: list[str] = field(default_factory=list)
 
     def summary(self) -> dict:
@@ -65,6 +81,7 @@ class ValidationResult:
             "rows": self.rows,
             "runs": self.runs,
             "wall_seconds": round(self.wall_seconds, 1),
+            "table_simulations": self.table_simulations,
         }
 
     def format_table(self) -> str:
@@ -79,6 +96,11 @@ class ValidationResult:
                 f"{row['method']:>12} {row['datasets']:8d} {row['mean_abs_error_kg']:12.4f} "
                 f"{row['median_sd_kg']:9.4f} {row['coverage']:9.2f} "
                 f"{row['simulations_per_dataset']:6.0f} {row['median_wall_seconds']:9.1f}"
+            )
+        if self.table_simulations:
+            lines.append(
+                f"rejection methods: sims are the rows each dataset used of one shared table of "
+                f"{self.table_simulations} simulations"
             )
         return "\n".join(lines)
 
@@ -95,6 +117,8 @@ def validation_study(
     inputs: xr.Dataset | None = None,
     t_calibration: float = 1060.0,
     smc_epsilon: float = 0.02,
+    reference_table: bool = False,
+    smc_draws: int | None = None,
 ) -> ValidationResult:
     """Calibrate the charge on ``n_datasets`` noisy datasets with each method (see module).
 
@@ -106,6 +130,8 @@ def validation_study(
         sensor_noise: noise of the data (default: typical, 0.3 K / 0.5 % / 1 %).
         unit, inputs, t_calibration: the unit, its input profile and calibration window.
         smc_epsilon: kernel width of SMC-ABC methods.
+        reference_table: the rejection methods share one table of prior simulations (module).
+        smc_draws: particles of the likelihood path (default: the budget's ``smc_draws``).
     """
     started = time.perf_counter()
     unknown = [name for name in methods if name not in METHODS]
@@ -114,7 +140,7 @@ def validation_study(
     if int(n_datasets) != n_datasets or n_datasets < 1:
         raise ValueError(f"n_datasets must be a positive integer, got {n_datasets}")
     sensor_noise = sensor_noise or SensorNoise.typical()
-    unit = unit or load_unit()
+    unit = settings.unit(unit)
     spec = unit.parameters[CHARGE]
     if not spec.low <= reference_kg <= spec.high:
         raise ValueError(
@@ -129,11 +155,18 @@ def validation_study(
         settings.out.mkdir(parents=True, exist_ok=True)
         log = settings.out / "runs.jsonl"
         log.write_text("")
+    seeds = settings.seeds(int(n_datasets))
+    table = None
     with settings.open_executor() as executor:
-        for dataset, seed in enumerate(settings.seeds(int(n_datasets))):
+        for dataset, seed in enumerate(seeds):
             observed = reference_data(
                 simulator, reference_kg, sensor_noise, np.random.default_rng(seed.spawn(1)[0])
             )
+            wants_table = any(METHODS[method][0] == "rejection" for method in methods)
+            if reference_table and wants_table and table is None:
+                table = shared_table(
+                    simulator, prior, observed, settings, executor, seeds[0], "validate_table"
+                )
             for method in methods:
                 sampler, aware, distance = METHODS[method]
                 begun = time.perf_counter()
@@ -149,6 +182,8 @@ def validation_study(
                     smc_epsilon,
                     sensor_noise if aware else None,
                     distance,
+                    table,
+                    smc_draws,
                 )
                 draws = tree["posterior"][CHARGE].values.ravel()
                 low, high = np.quantile(draws, [(1 - INTERVAL) / 2, (1 + INTERVAL) / 2])
@@ -170,7 +205,13 @@ def validation_study(
         _summarise(method, [r for r in runs if r["method"] == method], reference_kg)
         for method in methods
     ]
-    result = ValidationResult(float(reference_kg), rows, runs, time.perf_counter() - started)
+    result = ValidationResult(
+        float(reference_kg),
+        rows,
+        runs,
+        time.perf_counter() - started,
+        table.n_simulations if table is not None else 0,
+    )
     if settings.out is not None:
         write_text(settings.out / "comparison.txt", result.format_table() + "\n")
         write_json(settings.out / "summary.json", result.summary())
