@@ -39,6 +39,7 @@ from pymc_vcc.physics.components.smooth import (
     soft_cap,
 )
 from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
+from pymc_vcc.physics.cycles.split_unit import COIL_RECORD, coil_cell_heat
 from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import (
     entropy,
@@ -251,8 +252,60 @@ def test_cell_heat_averages_flux_over_the_cell():
     mixed = cell_heat(300.0, 1.0, 1.2, 0.7, 330.0, 315.0, 310.0, *htcs)
     assert -3000.0 * 20.0 < mixed < -800.0 * 10.0
     # Simpson's rule by hand
-    by_hand = (800.0 * -30.0 + 4 * refrigerant_htc(0.95, *htcs) * -15.0 + 3000.0 * -10.0) / 6.0
+    a_out = refrigerant_htc(0.7, *htcs)
+    by_hand = (800.0 * -30.0 + 4 * refrigerant_htc(0.95, *htcs) * -15.0 + a_out * -10.0) / 6.0
     assert mixed == pytest.approx(by_hand, rel=2e-3)
+
+
+def test_coil_cell_heat_is_exact_across_blends_and_saturation_lines(tables):
+    # a flooded condenser's first cell: superheated inlet, subcooled outlet, all phases
+    p = 27e5
+    _, h_l, h_v, _, _ = saturation_state(tables, p)
+    coil = make_record(
+        COIL_RECORD,
+        {name: 0.0 for name in COIL_RECORD.names}
+        | {"refrigerant_area": 1.0, "htc_liquid": 2000.0, "htc_two_phase": 12000.0}
+        | {"htc_vapor": 1000.0},
+    )
+
+    def quality(h):
+        return (h - h_l) / (h_v - h_l)
+
+    h_in, h_out, T_wall = h_v + 40e3, h_l - 5e3, 300.0
+    fine = np.linspace(h_in, h_out, 20001)
+    flux = [
+        refrigerant_htc(quality(h), 2000.0, 12000.0, 1000.0, 1.0)
+        * (T_wall - state(tables, p, h)[0])
+        for h in fine
+    ]
+    exact = np.trapezoid(flux, fine) / (h_out - h_in)
+    ends = [(h, quality(h), state(tables, p, h)[0]) for h in (h_in, h_out)]
+    heat = coil_cell_heat(tables, p, coil, T_wall, 1.0, *ends[0], *ends[1])
+    assert heat == pytest.approx(exact, rel=1e-4)
+    # one Simpson rule over the whole cell is 8 % off (its middle is two-phase)
+    T_mid = state(tables, p, 0.5 * (h_in + h_out))[0]
+    htcs = (2000.0, 12000.0, 1000.0, 1.0)
+    one_rule = cell_heat(T_wall, 1.0, ends[0][1], ends[1][1], ends[0][2], T_mid, ends[1][2], *htcs)
+    assert abs(one_rule / exact - 1) > 0.05
+    # a cell inside one smooth stretch is the plain rule
+    inside = [(h, quality(h), state(tables, p, h)[0]) for h in (h_l + 2e4, h_l + 4e4)]
+    mid = state(tables, p, h_l + 3e4)[0]
+    plain = cell_heat(
+        T_wall,
+        1.0,
+        inside[0][1],
+        inside[1][1],
+        inside[0][2],
+        mid,
+        inside[1][2],
+        2000.0,
+        12000.0,
+        1000.0,
+        1.0,
+    )
+    assert coil_cell_heat(tables, p, coil, T_wall, 1.0, *inside[0], *inside[1]) == pytest.approx(
+        plain, rel=1e-12
+    )
 
 
 def test_soft_cap():

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from pymc_vcc.physics.probes import (
+    OSCILLATION_LIMIT,
     air_ranges,
     box_probe,
     charge_observability,
+    check_draw,
     noise_sd,
     rated_inputs,
     separation,
@@ -43,6 +45,15 @@ def test_a_dozen_box_draws_hold_every_law(unit):
     failed = [r for r in reports if not r.holds]
     assert not failed, failed
     assert all(r.oscillation < 1e-3 and r.mass_error < 1e-4 for r in reports)
+
+
+@pytest.mark.parametrize("draw", [82, 181])
+def test_no_limit_cycle_at_high_two_phase_htc(unit, draw):
+    """Box draws (seed 0) whose coil cell holding the dew point, between a two-phase HTC 6-12
+    times the vapour one, cycled at N = 10 (PC peak-to-peak 7.6e-3 and 0.13) are still."""
+    theta = unit.parameters.sample_uniform(draw + 1, np.random.default_rng(0))[draw]
+    report = check_draw(unit, theta)
+    assert report.holds and report.oscillation < OSCILLATION_LIMIT, report
 
 
 def test_charge_held_through_a_violent_start_up(unit):

@@ -63,10 +63,9 @@ def test_pi_loop_holds_the_charge_and_switching_it_off_drifts(full_runs, unit):
     error_off = np.abs(off.M.values - m0) / m0
     assert error_on.max() < 1e-4
     assert on.attrs["mass_error"] == pytest.approx(error_on.max())
-    # without the loop, integration errors accumulate: over the second half the error is
-    # several times larger (measured: 1.3e-5 against 2.3e-6)
-    half = on.sizes["time"] // 2
-    assert error_off[half:].mean() > 3 * error_on[half:].mean()
+    # without the loop, integration errors accumulate: at the end the error is several times
+    # larger (measured at atol_enthalpy 5 J/kg: 4.2e-6 against 4.8e-7)
+    assert error_off[-1] > 3 * error_on[-1]
     assert off.attrs["source_integral"] == 0.0 < on.attrs["source_integral"]
 
 

@@ -12,8 +12,14 @@ LIQUID_BLEND = (-0.05, 0.4)
 """Quality range over which the HTC rises from the liquid to the two-phase value (the liquid
 film dominates at low quality, in evaporation and condensation alike)."""
 
-VAPOR_BLEND = (0.9, 1.05)
-"""Quality range of dry-out, from the two-phase to the vapour value."""
+VAPOR_BLEND = (0.6, 1.1)
+"""Quality range of dry-out, from the two-phase to the vapour value. As wide as the data on
+dry-out onset allow (x 0.6-0.9 by heat flux): with [0.9, 1.05], a cell holding the dew point
+in a coil whose two-phase HTC is 10-16 times its vapour HTC excited a limit cycle at N = 10."""
+
+FLUX_KINKS = (LIQUID_BLEND[0], 0.0, LIQUID_BLEND[1], VAPOR_BLEND[0], 1.0, VAPOR_BLEND[1])
+"""Qualities, ascending, where the local flux α(x)(T_w - T) has a kink: the blend edges and
+the saturation lines (where T(h) has one). Between them it is smooth."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -65,15 +71,10 @@ def cell_heat(
     htc_vapor: float,
     flow_ratio: float,
 ) -> float:
-    """Heat from the wall to a cell's refrigerant, W: the local flux α(x) (T_w - T) averaged
-    over the cell, whose enthalpy runs linearly from its inlet to its outlet (state) value
-    (Simpson's rule on inlet, middle and outlet; ``T_mid`` at the middle enthalpy).
-
-    A cell containing the dew or bubble point so sees the length-weighted mix of the phases'
-    coefficients and temperatures, which changes as smoothly as its inlet and outlet do,
-    instead of switching as its single state crosses a blend (which excited a limit cycle at
-    N = 10).
-    """
+    """Heat from the wall to a stretch of refrigerant, W: the local flux α(x) (T_w - T)
+    averaged over it, its enthalpy running linearly from inlet to outlet (Simpson's rule on
+    inlet, middle and outlet; ``T_mid`` at the middle enthalpy). Exact to the order of the rule
+    only where the flux is smooth, i.e. between two of :data:`FLUX_KINKS`."""
     middle = 0.5 * (quality_in + quality_out)
     a_in = refrigerant_htc(quality_in, htc_liquid, htc_two_phase, htc_vapor, flow_ratio)
     a_mid = refrigerant_htc(middle, htc_liquid, htc_two_phase, htc_vapor, flow_ratio)

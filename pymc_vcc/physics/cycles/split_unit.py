@@ -24,7 +24,7 @@ from pymc_vcc.physics.components.compressor import (
     volumetric_efficiency,
 )
 from pymc_vcc.physics.components.fan import air_capacity_rate, fan_operating_point
-from pymc_vcc.physics.components.heat_transfer import cell_heat
+from pymc_vcc.physics.components.heat_transfer import FLUX_KINKS, cell_heat
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
 from pymc_vcc.physics.cycles.base import StateLayout, quality_enthalpy
@@ -319,23 +319,49 @@ def flow_through_drops(
 
 @njit(cache=True, error_model="numpy")
 def coil_cell_heat(tables, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T):
-    """Heat from the wall to one coil cell's refrigerant, W: the cell-mean flux of
-    :func:`~pymc_vcc.physics.components.heat_transfer.cell_heat` between its inlet (``h_in``,
-    ``x_in``, ``T_in``) and its own state (``h``, ``x``, ``T``) at pressure ``p``."""
-    T_mid = state(tables, p, 0.5 * (h_in + h))[0]
-    return cell_heat(
-        T_wall,
-        coil.refrigerant_area,
-        x_in,
-        x,
-        T_in,
-        T_mid,
-        T,
-        coil.htc_liquid,
-        coil.htc_two_phase,
-        coil.htc_vapor,
-        flow_ratio,
-    )
+    """Heat from the wall to one coil cell's refrigerant, W: the cell-mean flux, its enthalpy
+    running linearly from its inlet (``h_in``, ``x_in``, ``T_in``) to its own state (``h``,
+    ``x``, ``T``) at pressure ``p``, by
+    :func:`~pymc_vcc.physics.components.heat_transfer.cell_heat` on each stretch between the
+    :data:`~pymc_vcc.physics.components.heat_transfer.FLUX_KINKS` it holds, weighted by
+    length.
+
+    A cell spanning a blend or a saturation line so sees the exact mix of the phases' fluxes,
+    which changes as smoothly as its inlet and outlet do. With one Simpson rule over the whole
+    cell, its middle point switched most of the cell between two coefficients as it crossed
+    a blend (in a flooded condenser whose first cell holds the whole of desuperheating and
+    condensation: a limit cycle at N = 10).
+    """
+    rising = x >= x_in
+    total = 0.0
+    h_a, x_a, T_a = h_in, x_in, T_in
+    for k in range(len(FLUX_KINKS) + 1):
+        if k < len(FLUX_KINKS):
+            edge = FLUX_KINKS[k if rising else len(FLUX_KINKS) - 1 - k]
+            if (edge - x_a) * (x - edge) <= 0.0:
+                continue  # not strictly ahead of this stretch's start and before the outlet
+            x_b = edge
+            h_b = h_in + (edge - x_in) / (x - x_in) * (h - h_in)
+            T_b = state(tables, p, h_b)[0]
+        else:
+            h_b, x_b, T_b = h, x, T
+        T_mid = state(tables, p, 0.5 * (h_a + h_b))[0]
+        weight = (h_b - h_a) / (h - h_in) if h != h_in else 1.0
+        total += weight * cell_heat(
+            T_wall,
+            coil.refrigerant_area,
+            x_a,
+            x_b,
+            T_a,
+            T_mid,
+            T_b,
+            coil.htc_liquid,
+            coil.htc_two_phase,
+            coil.htc_vapor,
+            flow_ratio,
+        )
+        h_a, x_a, T_a = h_b, x_b, T_b
+    return total
 
 
 @njit(cache=True, error_model="numpy")
