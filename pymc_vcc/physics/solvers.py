@@ -55,6 +55,13 @@ Jac = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``jac(y, f)``: the Jacobian ∂f/∂y at ``y``, given ``f = f(y)``."""
 
 
+def _wall_clock_failure(limit: float, t: float) -> Failure:
+    """The failure of a run stopped by its wall-clock ``limit`` (s) at model time ``t`` (s)."""
+    return Failure(
+        FailureKind.WALL_CLOCK, f"wall-clock limit of {limit:.1f} s reached at t = {t:.1f} s"
+    )
+
+
 @dataclass
 class Counters:
     """Work done so far, summed over segments.
@@ -146,10 +153,7 @@ class RadauSolver:
                 max_step=self.max_step,
             )  # fmt: skip
         except _WallClockLimit:
-            return y0, Failure(
-                FailureKind.WALL_CLOCK,
-                f"wall-clock limit of {limit:.1f} s reached at t = {t0:.1f} s",
-            )
+            return y0, _wall_clock_failure(limit, t0)
         except Exception as error:
             return y0, Failure(
                 FailureKind.SOLVER,
@@ -161,10 +165,7 @@ class RadauSolver:
             try:
                 message = solver.step()
             except _WallClockLimit:
-                return solver.y, Failure(
-                    FailureKind.WALL_CLOCK,
-                    f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s",
-                )
+                return solver.y, _wall_clock_failure(limit, solver.t)
             except Exception as error:
                 reason = f"{type(error).__name__}: {error}"
                 return solver.y, Failure(
@@ -182,10 +183,7 @@ class RadauSolver:
                 states_out[done:ready] = solver.dense_output()(t_out[done:ready]).T
                 done = ready
             if time.perf_counter() > deadline:
-                return solver.y, Failure(
-                    FailureKind.WALL_CLOCK,
-                    f"wall-clock limit of {limit:.1f} s reached at t = {solver.t:.1f} s",
-                )
+                return solver.y, _wall_clock_failure(limit, solver.t)
         return solver.y, None
 
 
@@ -285,10 +283,7 @@ class CvodeSolver:
         try:
             result = self._cvode.solve(tspan, y0)
         except _WallClockLimit:
-            return y0, Failure(
-                FailureKind.WALL_CLOCK,
-                f"wall-clock limit of {self.wall_limit:.1f} s reached at t = {self._t:.1f} s",
-            )
+            return y0, _wall_clock_failure(self.wall_limit, self._t)
         except Exception as error:
             return y0, Failure(
                 FailureKind.SOLVER,
