@@ -12,6 +12,7 @@ import json
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from pymc_vcc import __version__
@@ -102,32 +103,22 @@ def _demo(args: argparse.Namespace) -> int:
 def _estimate(args: argparse.Namespace) -> int:
     from pymc_vcc.studies import estimation_study
 
+    settings = _settings(args)
+    if args.simulations is not None:
+        budget = settings.work.with_rejection_simulations(args.simulations)
+        settings = replace(settings, budget=budget)
     result = estimation_study(
-        _settings(args),
+        settings,
         method=args.method,
         smc_epsilon=args.epsilon,
         smc_draws=args.particles,
         sensor_noise=_sensor_noise(args),
     )
-    summary = result.summary()
-    lines = [
-        f"{'parameter':10s} {'truth 1':>10s} {'mean 1':>10s} {'sd ratio 1':>10s} "
-        f"{'truth 2':>10s} {'mean 2':>10s} {'sd ratio 2':>10s}"
-    ]
-    for name in result.truths[0]:
-        cells = []
-        for k in range(2):
-            cells += [
-                summary["truths"][k][name],
-                summary["posterior_means"][k][name],
-                summary["sd_ratio"][k][name],
-            ]
-        lines.append(f"{name:10s} " + " ".join(f"{value:10.4g}" for value in cells))
-    text = "\n".join(lines) + (
-        f"\n\n{result.n_simulations} simulations, {result.wall_seconds:.0f} s "
-        "(sd ratio: posterior sd / sd of the uniform Table III prior)"
+    text = (
+        f"{result.format_table()}\n\n{result.n_simulations} simulations, "
+        f"{result.wall_seconds:.0f} s (sd ratio: posterior sd / sd of the uniform Table III prior)"
     )
-    return _report(args, text, summary)
+    return _report(args, text, result.summary())
 
 
 def _validate(args: argparse.Namespace) -> int:
@@ -349,9 +340,16 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sensor_noise_option(estimate)
     estimate.add_argument(
         "--method",
-        choices=["rejection", "smc"],
+        choices=["rejection", "smc", "likelihood"],
         default="rejection",
-        help="sampler: the paper's ABC rejection, or SMC-ABC (far fewer simulations)",
+        help="sampler: the paper's ABC rejection, SMC-ABC (far fewer simulations), or tempered "
+        "SMC on the exact likelihood (needs --sensor-noise typical)",
+    )
+    estimate.add_argument(
+        "--simulations",
+        type=int,
+        help="rejection: about this many simulations per dataset, pilot, main and accepted draws "
+        "in the budget's proportions (default: the budget's)",
     )
     estimate.add_argument(
         "--epsilon",
@@ -360,7 +358,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="SMC-ABC: width of the Gaussian kernel on the KS distance (default 0.01)",
     )
     estimate.add_argument(
-        "--particles", type=int, help="SMC-ABC: particles per dataset (default: the budget's)"
+        "--particles",
+        type=int,
+        help="smc and likelihood: particles per dataset (default: the budget's)",
     )
     estimate.set_defaults(handler=_estimate)
 

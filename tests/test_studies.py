@@ -13,9 +13,15 @@ import pytest
 import xarray as xr
 
 from pymc_vcc.cli import main
+from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.inference.likelihood import log_likelihood
 from pymc_vcc.inference.noise import SensorNoise
+from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.series import prepare_observed
 from pymc_vcc.studies import StudySettings, leak_study
+from pymc_vcc.studies.estimate import smc_sequential_calibration
 from pymc_vcc.studies.leak import leak_alarm
+from pymc_vcc.testing import SensorProblem
 
 
 def test_leak_command_writes_table_ii_and_reloadable_trees(tmp_path, capsys):
@@ -114,10 +120,15 @@ def test_killed_leak_run_resumes_and_completes(tmp_path):
 
 def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys):
     out = tmp_path / "estimate"
-    main(["estimate", "--budget", "smoke", "--out", str(out), "--json"])
-    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    main(["estimate", "--budget", "smoke", "--out", str(out)])
+    table = capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
     assert set(summary) >= {"truths", "posterior_means", "sd_ratio", "n_simulations"}
     assert len(summary["truths"]) == 2 and len(summary["truths"][0]) == 26
+    inside = summary["n_truths_in_95"]
+    assert inside == [sum(flags.values()) for flags in summary["truth_in_95"]]
+    assert f"truths inside their 95 % intervals: {inside[0]}/26 and {inside[1]}/26" in table
+    assert table.count(" yes") + table.count(" NO") == 2 * 26
     folder = out
     for stem in (
         "fig4_inputs",
@@ -147,6 +158,54 @@ def test_estimate_with_smc_and_cvode(tmp_path, capsys):
     assert {"prior", "posterior", "posterior_predictive"} <= set(tree.children)
     assert tree["prior"]["M0"].size == 4
     assert (out / "fig5_kde_dataset1.png").exists()
+
+
+def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stage(quiet_pymc):
+    """Dataset 2, calibrated from dataset 1's GMM posterior, has the posterior of both."""
+    problem = SensorProblem()
+    noise = SensorNoise.typical()
+    rng = np.random.default_rng(5)
+    observed = [noise.measure(problem.dataset(1.3), rng) for _ in range(2)]
+    with make_executor("serial") as executor:
+        result = smc_sequential_calibration(
+            problem,
+            UniformPrior(problem.bounds),
+            observed,
+            draws=600,
+            epsilon=0.01,
+            executor=executor,
+            settings=StudySettings(executor="serial"),
+            seed=np.random.SeedSequence(0),
+            sensor_noise=noise,
+            likelihood=True,
+        )
+    grid = np.linspace(1.2, 1.4, 4001)  # the exact posteriors, on a grid of the flat prior
+    log_p = np.zeros_like(grid)
+    for tree, data in zip(result.trees, observed, strict=True):
+        prepared = prepare_observed(data, None, problem.output_names)
+        resolved = noise.resolve(prepared)
+        log_p += [log_likelihood(prepared.values, problem.outputs(m), resolved) for m in grid]
+        weights = np.exp(log_p - log_p.max())
+        mean = np.average(grid, weights=weights)
+        sd = np.sqrt(np.average((grid - mean) ** 2, weights=weights))
+        draws = tree["posterior"]["M0"].values.ravel()
+        assert draws.mean() == pytest.approx(mean, abs=0.1 * sd)
+        assert draws.std() == pytest.approx(sd, rel=0.1)
+    assert result.trees[1]["prior"]["M0"].size == 600
+
+
+def test_estimate_on_the_likelihood_needs_sensor_noise(tmp_path, capsys):
+    assert main(["estimate", "--method", "likelihood", "--out", str(tmp_path / "e")]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "needs a sensor_noise" in error
+
+
+def test_a_rejection_budget_scales_to_a_simulation_count():
+    budget = StudySettings(budget="paper").work.with_rejection_simulations(8500)
+    assert (budget.n_pilot, budget.n_main, budget.n_desired) == (500, 8000, 400)
+    assert budget.n_pilot + budget.n_main == 8500
+    with pytest.raises(ValueError, match="simulations must be an integer >= 20, got 5"):
+        budget.with_rejection_simulations(5)
 
 
 def test_sobol_command_writes_heatmaps(tmp_path, capsys):

@@ -12,7 +12,7 @@ import json
 import shutil
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -52,6 +52,22 @@ class Budget:
     smc_draws: int
     sobol_base: int
     predictive_draws: int
+
+    def with_rejection_simulations(self, simulations: int) -> Budget:
+        """This budget with its rejection sampler running about ``simulations`` per dataset,
+        pilot and main draws and accepted draws in this budget's proportions."""
+        if not isinstance(simulations, int) or simulations < 20:
+            raise ValueError(f"simulations must be an integer >= 20, got {simulations!r}")
+        n_pilot = max(1, round(simulations * self.n_pilot / (self.n_pilot + self.n_main)))
+        n_main = simulations - n_pilot
+        n_desired = max(1, round(n_main * self.n_desired / self.n_main))
+        return replace(
+            self,
+            name=f"{self.name}-{simulations}",
+            n_pilot=n_pilot,
+            n_main=n_main,
+            n_desired=n_desired,
+        )
 
 
 BUDGETS: dict[str, Budget] = {

@@ -10,10 +10,11 @@ the jagged median of noisy draws), against the measured data (the reference runs
 sensor noise if given), and dataset 2 is also simulated with dataset 1's true parameters (the
 uncalibrated model of Fig. 8).
 
-Two samplers (``method``): the paper's two-phase ABC rejection (Table I's budget), or PyMC's
+Three samplers (``method``): the paper's two-phase ABC rejection (Table I's budget), PyMC's
 SMC-ABC on the same KS distance with a Gaussian kernel of width ε, all particles of a stage
 simulated in parallel (:func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`), which tempers
-towards the posterior instead of discarding 95 % of its simulations.
+towards the posterior instead of discarding 95 % of its simulations, or the same tempered SMC
+on the exact likelihood of noisy data under known sensor noise (``"likelihood"``).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
+from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
@@ -47,8 +49,12 @@ from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_js
 SENSITIVE = ("M0", "CF_VOL", "CF_POW", "CF_PREF", "CF_LEV")
 """Parameters the paper found well identified (Fig. 5), shown first in the KDE figures."""
 
-METHODS: tuple[str, ...] = ("rejection", "smc")
-"""Samplers of the study: the paper's ABC rejection, or SMC-ABC (PyMC, parallel kernel)."""
+METHODS: tuple[str, ...] = ("rejection", "smc", "likelihood")
+"""Samplers of the study: the paper's ABC rejection, SMC-ABC, or tempered SMC on the exact
+likelihood (both PyMC's SMC with the parallel kernel)."""
+
+INTERVAL = 0.95
+"""Probability of the central posterior interval checked against the truth."""
 
 
 @dataclass
@@ -61,6 +67,7 @@ class EstimationResult:
         predictive: each dataset's tree with its posterior predictive over the whole profile.
         uncalibrated: dataset 2's profile simulated with dataset 1's true parameters.
         contraction: posterior sd / sd of the first (uniform) prior, per parameter and dataset.
+        covered: whether each truth lies in its central 95 % posterior interval, per dataset.
         n_simulations: forward simulations run by the samplers.
         wall_seconds: wall time of the whole study, s.
     """
@@ -70,12 +77,14 @@ class EstimationResult:
     predictive: list[xr.DataTree]
     uncalibrated: xr.Dataset
     contraction: list[dict[str, float]]
+    covered: list[dict[str, bool]]
     n_simulations: int
     wall_seconds: float
     files: list[str] = field(default_factory=list)
 
     def summary(self) -> dict:
-        """The JSON summary: truths, posterior means, contraction, counts and wall time."""
+        """The JSON summary: truths, posterior means, contraction, coverage of the truths by
+        the 95 % intervals, counts and wall time."""
         means = [
             {name: float(tree["posterior"][name].mean()) for name in truth}
             for tree, truth in zip(self.calibration.trees, self.truths, strict=True)
@@ -84,9 +93,30 @@ class EstimationResult:
             "truths": self.truths,
             "posterior_means": means,
             "sd_ratio": self.contraction,
+            "truth_in_95": self.covered,
+            "n_truths_in_95": [sum(flags.values()) for flags in self.covered],
             "n_simulations": self.n_simulations,
             "wall_seconds": round(self.wall_seconds, 2),
         }
+
+    def format_table(self) -> str:
+        """Truth, posterior mean, sd ratio and whether the truth is in the 95 % interval, per
+        parameter and dataset, then how many truths each dataset's intervals hold."""
+        header = "".join(
+            f" {'truth ' + k:>10s} {'mean ' + k:>10s} {'sd ratio ' + k:>10s} {'in 95 ' + k:>7s}"
+            for k in "12"
+        )
+        lines = [f"{'parameter':10s}{header}"]
+        means = self.summary()["posterior_means"]
+        for name in self.truths[0]:
+            cells = [
+                f"{self.truths[k][name]:10.4g} {means[k][name]:10.4g} "
+                f"{self.contraction[k][name]:10.4g} {'yes' if self.covered[k][name] else 'NO':>7s}"
+                for k in range(len(self.truths))
+            ]
+            lines.append(f"{name:10s} " + " ".join(cells))
+        inside = " and ".join(f"{sum(flags.values())}/{len(flags)}" for flags in self.covered)
+        return "\n".join([*lines, f"truths inside their 95 % intervals: {inside}"])
 
 
 def draw_reference_parameters(
@@ -119,6 +149,16 @@ def _sd_ratio(tree: xr.DataTree, first_prior: Prior) -> dict[str, float]:
     }
 
 
+def _covered(tree: xr.DataTree, truth: dict[str, float]) -> dict[str, bool]:
+    """Whether each true value lies in the central :data:`INTERVAL` posterior interval."""
+    tails = [(1 - INTERVAL) / 2, (1 + INTERVAL) / 2]
+    covered = {}
+    for name, value in truth.items():
+        low, high = np.quantile(tree["posterior"][name].values, tails)
+        covered[name] = bool(low <= value <= high)
+    return covered
+
+
 def smc_sequential_calibration(
     simulator: VCCSimulator,
     first_prior: Prior,
@@ -130,9 +170,12 @@ def smc_sequential_calibration(
     settings: StudySettings,
     seed: np.random.SeedSequence,
     sensor_noise: SensorNoise | None = None,
+    likelihood: bool = False,
 ) -> SequentialResult:
-    """Algorithm 1 with SMC-ABC: each dataset's posterior, fitted by a Gaussian mixture, is the
-    next dataset's prior. Each tree also gets a ``prior`` group of ``draws`` prior draws."""
+    """Algorithm 1 with tempered SMC: each dataset's posterior, fitted by a Gaussian mixture, is
+    the next dataset's prior. SMC-ABC on the KS distance, or with ``likelihood`` the exact
+    likelihood under ``sensor_noise`` (known scales). Each tree also gets a ``prior`` group of
+    ``draws`` prior draws."""
     trees: list[xr.DataTree] = []
     priors: list[Prior] = []
     for k, (observed, stage_seed) in enumerate(
@@ -141,15 +184,26 @@ def smc_sequential_calibration(
         sampler_seed, prior_seed = (int(x) for x in stage_seed.generate_state(2))
         prior = first_prior if k == 0 else GMMPrior.fit(trees[-1], first_prior, seed=prior_seed)
         with pm.Model():
-            add_simulator(
-                "outputs",
-                simulator,
-                observed,
-                prior=prior,
-                epsilon=epsilon,
-                sensor_noise=sensor_noise,
-                time_limit_s=settings.time_limit,
-            )
+            if likelihood:
+                assert sensor_noise is not None
+                add_likelihood(
+                    "outputs",
+                    simulator,
+                    observed,
+                    sensor_noise=sensor_noise,
+                    prior=prior,
+                    time_limit_s=settings.time_limit,
+                )
+            else:
+                add_simulator(
+                    "outputs",
+                    simulator,
+                    observed,
+                    prior=prior,
+                    epsilon=epsilon,
+                    sensor_noise=sensor_noise,
+                    time_limit_s=settings.time_limit,
+                )
             tree = sample_smc_abc(
                 draws,
                 executor=executor,
@@ -194,15 +248,23 @@ def estimation_study(
         t_calibration: end of the calibration window, s (the paper: 1060 s of 2120 s).
         noise_bounds: bounds of each output's learnable noise scale ν (relative, Algorithm 1).
         max_attempts: reference draws tried until both datasets simulate successfully.
-        method: ``"rejection"`` (the paper's, Table I's budget) or ``"smc"`` (SMC-ABC).
+        method: ``"rejection"`` (the paper's, Table I's budget), ``"smc"`` (SMC-ABC) or
+            ``"likelihood"`` (tempered SMC on the exact likelihood; needs ``sensor_noise``).
         smc_epsilon: width ε of SMC-ABC's Gaussian kernel on the KS distance (in [0, 1]).
         smc_draws: SMC particles per dataset (default: the budget's ``smc_draws``).
         sensor_noise: noise of the sensors, added to the reference data (with the seed) and
             calibrated as learnable scales ``sigma_<output>`` in engineering units, in place of
-            the paper's relative ν; None: noise-free data and ν (the paper).
+            the paper's relative ν (with ``"likelihood"``: known scales); None: noise-free data
+            and ν (the paper).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
+    likelihood = method == "likelihood"
+    if likelihood and sensor_noise is None:
+        raise ValueError(
+            "method='likelihood' needs a sensor_noise (the likelihood of noise-free data is "
+            "degenerate); pass e.g. SensorNoise.typical() or --sensor-noise typical"
+        )
     started = time.perf_counter()
     unit = settings.unit(unit)
     full = VCCSimulator(unit, inputs)
@@ -217,7 +279,7 @@ def estimation_study(
             if attempt == max_attempts - 1:
                 raise
     if sensor_noise is not None:  # measured over the whole profile, calibrated on its start
-        sensor_noise = replace(sensor_noise, learnable=True)
+        sensor_noise = replace(sensor_noise, learnable=not likelihood)
         noise_rng = np.random.default_rng(draw_seed.spawn(1)[0])
         references = [sensor_noise.measure(data, noise_rng) for data in references]
     observed = [ref.sel(time=slice(0.0, t_calibration)) for ref in references]
@@ -225,7 +287,7 @@ def estimation_study(
     prior = UniformPrior({spec.id: (spec.low, spec.high) for spec in unit.parameters})
     noise = None if sensor_noise else dict.fromkeys(OUTPUT_IDS, noise_bounds)
     with settings.open_executor() as executor:
-        if method == "smc":
+        if method != "rejection":
             calibration = smc_sequential_calibration(
                 calibration_model,
                 with_noise(prior, noise, OUTPUT_IDS),
@@ -236,6 +298,7 @@ def estimation_study(
                 settings=settings,
                 seed=sampler_seed,
                 sensor_noise=sensor_noise,
+                likelihood=likelihood,
             )
         else:
             calibration = sequential_calibration(
@@ -271,6 +334,9 @@ def estimation_study(
         predictive=predictive,
         uncalibrated=uncalibrated,
         contraction=[_sd_ratio(tree, prior) for tree in calibration.trees],
+        covered=[
+            _covered(tree, truth) for tree, truth in zip(calibration.trees, truths, strict=True)
+        ],
         n_simulations=sum(int(tree["sample_stats"]["n_simulations"]) for tree in calibration.trees),
         wall_seconds=time.perf_counter() - started,
     )
