@@ -210,6 +210,25 @@ def test_a_checkpoint_refuses_a_run_with_other_arguments(tmp_path):
         abc_rejection(MODEL, UniformPrior(MODEL.bounds), OBSERVED + 1.0, **arguments, **SETTINGS)
 
 
+@dataclass(frozen=True)
+class SolvedLocation(GaussianLocation):
+    """A location model that names its solver, as VCCSimulator does."""
+
+    solver: str = "radau"
+
+    @property
+    def checkpoint_identity(self) -> str:
+        return f"solver {self.solver}"
+
+
+def test_a_checkpoint_refuses_to_resume_with_another_solver(tmp_path):
+    arguments = dict(distance=MODEL.distance, executor="serial", checkpoint=tmp_path / "c.sqlite")
+    radau, cvode = SolvedLocation(), SolvedLocation(solver="cvode")
+    abc_rejection(radau, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **SETTINGS)
+    with pytest.raises(CheckpointMismatchError, match=r"differing: \['simulator'\]"):
+        abc_rejection(cvode, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **SETTINGS)
+
+
 def test_a_damaged_checkpoint_is_refused_naming_the_file(tmp_path):
     checkpoint = tmp_path / "run.sqlite"
     checkpoint.write_bytes(b"this is not a database, it was overwritten" * 100)

@@ -45,6 +45,24 @@ CREATE TABLE IF NOT EXISTS simulations (
 """
 
 
+def describe_callable(obj: object) -> str:
+    """``module.qualname`` of a simulator or distance (through ``functools.partial``), with its
+    ``checkpoint_identity`` if it has one: what a checkpoint records of the code it ran."""
+    target = getattr(obj, "func", obj)
+    name = getattr(target, "__qualname__", type(target).__qualname__)
+    described = f"{getattr(target, '__module__', '')}.{name}"
+    identity = getattr(target, "checkpoint_identity", None)
+    return f"{described} ({identity})" if identity else described
+
+
+def array_digest(*arrays: np.ndarray) -> str:
+    """SHA-256 of the arrays' bytes, in order."""
+    digest = hashlib.sha256()
+    for array in arrays:
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
 class SimulationRecord(NamedTuple):
     """One finished simulation: where it belongs, its distance (NaN if failed) and status."""
 

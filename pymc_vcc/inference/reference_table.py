@@ -34,7 +34,12 @@ from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, ex
 from pymc_vcc.execution.outcomes import OK, crash_outcome, run_simulation
 from pymc_vcc.execution.output_folder import atomic_path
 from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
-from pymc_vcc.execution.store import CheckpointDamagedError, CheckpointMismatchError
+from pymc_vcc.execution.store import (
+    CheckpointDamagedError,
+    CheckpointMismatchError,
+    array_digest,
+    describe_callable,
+)
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import SensorNoise, is_noise_parameter
 from pymc_vcc.inference.priors import Prior, check_prior_support
@@ -42,15 +47,13 @@ from pymc_vcc.inference.rejection import (
     MAIN,
     PHASE_NAMES,
     PILOT,
-    _AcceptanceScan,
-    _describe,
-    _digest,
-    _PhaseRecords,
-    _prepare_observed,
-    _prior_stream,
-    _result_tree,
-    _simulation_stream,
+    AcceptanceScan,
+    PhaseRecords,
+    prepare_observed_for,
+    prior_stream,
+    result_tree,
     simulation_rng,
+    simulation_stream,
     split_seed,
 )
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
@@ -104,7 +107,7 @@ class _TableTask:
     def __call__(self, items: list[tuple[int, int, np.ndarray]]) -> list[tuple]:
         results = []
         for phase, index, theta in items:
-            rng = simulation_rng(self.entropy, self.spawn_key, _simulation_stream(phase), index)
+            rng = simulation_rng(self.entropy, self.spawn_key, simulation_stream(phase), index)
             parameters = {name: float(value) for name, value in zip(self.names, theta, strict=True)}
             outcome = run_simulation(
                 self.simulator, parameters, rng, self.observed, time_limit_s=self.time_limit
@@ -217,7 +220,7 @@ def simulate_table(
             "give the model parameters only and the sensor noise to table_rejection"
         )
     info = check_simulator(simulator)
-    data = _prepare_observed(info, observed, None)
+    data = prepare_observed_for(info, observed, None)
     check_prior_support(info.support, prior.bounds)
     entropy, spawn_key = split_seed(seed)
     settings = {
@@ -226,8 +229,8 @@ def simulate_table(
         "outputs": list(data.names),
         "n_time": int(data.values.shape[1]),
         "parameters": list(prior.names),
-        "prior_digest": _digest(*(v.values for _, v in sorted(prior.to_dataset().items()))),
-        "simulator": _describe(simulator),
+        "prior_digest": array_digest(*(v.values for _, v in sorted(prior.to_dataset().items()))),
+        "simulator": describe_callable(simulator),
         "time_limit": time_limit,
         "spawn_key": list(spawn_key),
     }
@@ -239,7 +242,7 @@ def simulate_table(
         entropy = int(np.random.SeedSequence().entropy)
     sizes = {PILOT: int(n_pilot), MAIN: int(n_main)}
     thetas = {
-        phase: prior.sample(size, simulation_rng(entropy, spawn_key, _prior_stream(phase), 0))
+        phase: prior.sample(size, simulation_rng(entropy, spawn_key, prior_stream(phase), 0))
         for phase, size in sizes.items()
     }
     shape = data.values.shape
@@ -341,11 +344,11 @@ def table_rejection(
     records = {}
     for phase, rows in table.values.items():
         size = rows.shape[0]
-        phase_records = _PhaseRecords(size)
+        phase_records = PhaseRecords(size)
         ok = np.flatnonzero(table.status[phase] == OK)
         noisy = np.empty((ok.size, *rows.shape[1:]))
         for position, index in enumerate(ok):
-            rng = simulation_rng(entropy, spawn_key, _simulation_stream(phase), int(index))
+            rng = simulation_rng(entropy, spawn_key, simulation_stream(phase), int(index))
             noisy[position] = rows[index] if noise is None else noise.sample(rows[index], rng)
         distances = np.full(size, np.nan)
         if ok.size:
@@ -362,7 +365,7 @@ def table_rejection(
     if not pilot_ok.any():
         raise RuntimeError("every pilot simulation of the table failed; no threshold can be set")
     epsilon = float(np.quantile(records[PILOT].distance[pilot_ok], quantile))
-    scan = _AcceptanceScan(records[MAIN], epsilon, int(n_desired))
+    scan = AcceptanceScan(records[MAIN], epsilon, int(n_desired))
     scan.advance()
     n_main = records[MAIN].done.size
     settings = {
@@ -370,12 +373,12 @@ def table_rejection(
         "quantile": float(quantile),
         "n_desired": int(n_desired),
         "sensor_noise": repr(sensor_noise),
-        "distance": _describe(distance),
+        "distance": describe_callable(distance),
         "table_entropy": str(table.entropy),
         "entropy": str(entropy),
         "spawn_key": list(spawn_key),
     }
-    tree = _result_tree(
+    tree = result_tree(
         table.names,
         dict(table.thetas),
         records,

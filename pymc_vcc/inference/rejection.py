@@ -17,7 +17,6 @@ order, whatever finished first.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 import warnings
@@ -33,7 +32,12 @@ from pymc_vcc import __version__
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
 from pymc_vcc.execution.outcomes import FAILURE_KINDS, OK, crash_outcome, run_simulation
 from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
-from pymc_vcc.execution.store import SimulationRecord, SimulationStore
+from pymc_vcc.execution.store import (
+    SimulationRecord,
+    SimulationStore,
+    array_digest,
+    describe_callable,
+)
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import (
     OutputNoise,
@@ -67,11 +71,11 @@ def simulation_rng(
     )
 
 
-def _prior_stream(phase: int) -> int:
+def prior_stream(phase: int) -> int:
     return 2 * phase
 
 
-def _simulation_stream(phase: int) -> int:
+def simulation_stream(phase: int) -> int:
     return 2 * phase + 1
 
 
@@ -113,7 +117,7 @@ class SimulationTask:
         records: list[SimulationRecord | None] = [None] * len(items)
         finished: dict[tuple[int, ...], list[tuple[int, np.ndarray]]] = {}
         for position, (phase, index, theta) in enumerate(items):
-            rng = simulation_rng(self.entropy, self.spawn_key, _simulation_stream(phase), index)
+            rng = simulation_rng(self.entropy, self.spawn_key, simulation_stream(phase), index)
             parameters = {
                 name: float(theta[column])
                 for name, column in zip(self.model_names, self.model_columns, strict=True)
@@ -148,7 +152,7 @@ class SimulationTask:
         return records
 
 
-class _PhaseRecords:
+class PhaseRecords:
     """What is known about the simulations of one phase, by draw index."""
 
     def __init__(self, size: int) -> None:
@@ -171,10 +175,10 @@ class _PhaseRecords:
         self.elapsed[record.index] = record.elapsed
 
 
-class _AcceptanceScan:
+class AcceptanceScan:
     """Walks the main phase in draw order; finds where the n_desired-th acceptance happens."""
 
-    def __init__(self, records: _PhaseRecords, epsilon: float, n_desired: int) -> None:
+    def __init__(self, records: PhaseRecords, epsilon: float, n_desired: int) -> None:
         self.records = records
         self.epsilon = epsilon
         self.n_desired = n_desired
@@ -215,7 +219,7 @@ def _check_settings(
         raise ValueError(f"max_failure_rate must lie in (0, 1], got {max_failure_rate}")
 
 
-def _prepare_observed(
+def prepare_observed_for(
     info: SimulatorInfo, observed: OutputData, outputs: Sequence[str] | None
 ) -> ObservedData:
     simulated = info.output_names
@@ -244,19 +248,6 @@ def _model_names(info: SimulatorInfo, prior: Prior) -> tuple[str, ...]:
     return model
 
 
-def _describe(obj: object) -> str:
-    target = getattr(obj, "func", obj)  # functools.partial
-    name = getattr(target, "__qualname__", type(target).__qualname__)
-    return f"{getattr(target, '__module__', '')}.{name}"
-
-
-def _digest(*arrays: np.ndarray) -> str:
-    digest = hashlib.sha256()
-    for array in arrays:
-        digest.update(np.ascontiguousarray(array).tobytes())
-    return digest.hexdigest()
-
-
 def split_seed(seed: int | np.random.SeedSequence | None) -> tuple[int | None, tuple[int, ...]]:
     """(entropy, spawn_key) of a seed; (None, ()) for None."""
     if seed is None:
@@ -268,7 +259,7 @@ def split_seed(seed: int | np.random.SeedSequence | None) -> tuple[int | None, t
     return int(seed), ()
 
 
-def _check_failures(records: _PhaseRecords, phase: int, size: int, max_rate: float) -> None:
+def _check_failures(records: PhaseRecords, phase: int, size: int, max_rate: float) -> None:
     checked_after = min(size, _MIN_RUNS_FOR_FAILURE_CHECK)
     if records.n_done >= checked_after and records.n_failed > max_rate * records.n_done:
         failed = records.status[records.done & (records.status != OK)]
@@ -292,11 +283,11 @@ def _run_phase(
     task: SimulationTask,
     phase: int,
     thetas: np.ndarray,
-    records: _PhaseRecords,
+    records: PhaseRecords,
     store: SimulationStore | None,
     bar: PhaseProgress,
     max_failure_rate: float,
-    scan: _AcceptanceScan | None = None,
+    scan: AcceptanceScan | None = None,
 ) -> None:
     size = thetas.shape[0]
     _check_failures(records, phase, size, max_failure_rate)
@@ -394,7 +385,7 @@ def abc_rejection(
     if time_limit is not None and not time_limit > 0:
         raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
     info = check_simulator(simulator)
-    data = _prepare_observed(info, observed, outputs)
+    data = prepare_observed_for(info, observed, outputs)
     full_prior = with_noise(prior, noise, data.names)
     output_noise = None if sensor_noise is None else sensor_noise.resolve(data)
     if sensor_noise is not None:
@@ -412,10 +403,12 @@ def abc_rejection(
         "sensor_noise": repr(sensor_noise),
         "parameters": list(full_prior.names),
         "prior": full_prior.kind,
-        "prior_digest": _digest(*(v.values for _, v in sorted(full_prior.to_dataset().items()))),
-        "observed_digest": _digest(data.values),
-        "simulator": _describe(simulator),
-        "distance": _describe(distance),
+        "prior_digest": array_digest(
+            *(v.values for _, v in sorted(full_prior.to_dataset().items()))
+        ),
+        "observed_digest": array_digest(data.values),
+        "simulator": describe_callable(simulator),
+        "distance": describe_callable(distance),
         "time_limit": time_limit,
         "spawn_key": list(spawn_key),
     }
@@ -427,11 +420,11 @@ def abc_rejection(
             entropy = int(np.random.SeedSequence().entropy)
         thetas = {
             phase: full_prior.sample(
-                size, simulation_rng(entropy, spawn_key, _prior_stream(phase), 0)
+                size, simulation_rng(entropy, spawn_key, prior_stream(phase), 0)
             )
             for phase, size in ((PILOT, n_pilot), (MAIN, n_main))
         }
-        records = {PILOT: _PhaseRecords(n_pilot), MAIN: _PhaseRecords(n_main)}
+        records = {PILOT: PhaseRecords(n_pilot), MAIN: PhaseRecords(n_main)}
         for record in store.load() if store is not None else []:
             records[record.phase].add(record)
         task = SimulationTask(
@@ -470,7 +463,7 @@ def abc_rejection(
                     f"every one of the {n_pilot} pilot simulations failed; no threshold can be set"
                 )
             epsilon = float(np.quantile(records[PILOT].distance[pilot_ok], quantile))
-            scan = _AcceptanceScan(records[MAIN], epsilon, n_desired)
+            scan = AcceptanceScan(records[MAIN], epsilon, n_desired)
             _run_phase(
                 pool, task, MAIN, thetas[MAIN], records[MAIN], store, bar, max_failure_rate, scan
             )
@@ -485,7 +478,7 @@ def abc_rejection(
             RuntimeWarning,
             stacklevel=2,
         )
-    return _result_tree(
+    return result_tree(
         full_prior.names,
         thetas,
         records,
@@ -508,10 +501,10 @@ def _parameters_dataset(names: Sequence[str], thetas: np.ndarray) -> xr.Dataset:
     )
 
 
-def _result_tree(
+def result_tree(
     names: Sequence[str],
     thetas: dict[int, np.ndarray],
-    records: dict[int, _PhaseRecords],
+    records: dict[int, PhaseRecords],
     n_main_run: int,
     epsilon: float,
     data: ObservedData,

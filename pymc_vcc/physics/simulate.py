@@ -293,6 +293,17 @@ class VCCSimulator:
         ensure_compiled(self.unit)  # in a worker: before any run's time limit starts
 
     @property
+    def checkpoint_identity(self) -> str:
+        """What a checkpoint records of this simulator, so that a resume with another unit,
+        solver, window or fixed values is refused rather than mixed in."""
+        solver = self.solver or self.unit.solver.method
+        fixed = ", ".join(f"{name}={value:g}" for name, value in sorted(self.fixed.items()))
+        return (
+            f"unit {self.unit.name!r}, solver {solver}, window {self.t_window} s, "
+            f"controller {self.controller}, fixed {{{fixed}}}"
+        )
+
+    @property
     def parameter_bounds(self) -> dict[str, tuple[float, float]] | None:
         """The unit's bounds of the calibrated parameters (None with extrapolation allowed)."""
         if self.allow_outside_unit_bounds:

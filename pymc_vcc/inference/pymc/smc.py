@@ -76,7 +76,7 @@ from pymc_vcc.execution.executors import (
     executor_scope,
 )
 from pymc_vcc.execution.outcomes import OK, SimulationOutcome, crash_outcome
-from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore
+from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore, describe_callable
 from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import DistanceKernel, SimulatorFunction
 
@@ -451,10 +451,10 @@ def _graph_digest(variables: Sequence) -> str:
 
 
 def _describe(function: Callable[..., Any]) -> str:
-    target = function.simulator if isinstance(function, SimulatorFunction) else function
-    target = getattr(target, "func", target)  # functools.partial
-    name = getattr(target, "__qualname__", type(target).__qualname__)
-    return f"{getattr(target, '__module__', '')}.{name}"
+    """What a checkpoint records of a node's simulator (see :func:`describe_callable`)."""
+    return describe_callable(
+        function.simulator if isinstance(function, SimulatorFunction) else function
+    )
 
 
 def _run_settings(
