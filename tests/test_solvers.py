@@ -57,7 +57,7 @@ def test_linear_problem_matches_the_matrix_exponential(method):
 
 
 @pytest.mark.parametrize("method", METHODS)
-def test_failures_come_back_with_their_kind(method):
+def test_failures_come_back_with_their_kind(method, capsys):
     t_out = np.array([1.0, 2.0])
     late = np.full((2, 3), np.nan)
     _, failure = _solver(method).integrate(
@@ -77,6 +77,7 @@ def test_failures_come_back_with_their_kind(method):
     )
     assert failure is not None and failure.kind in (FailureKind.SOLVER, FailureKind.NON_FINITE)
     assert np.isnan(states[1]).all()
+    assert capsys.readouterr().out == ""  # the failure is in the result, not on the screen
 
 
 def test_unknown_method_names_the_choices():
