@@ -27,6 +27,12 @@ from pymc_vcc.execution.executors import (
     make_executor,
 )
 from pymc_vcc.execution.output_folder import OutputFolderError, atomic_path, claim_output_folder
+from pymc_vcc.inference.distances import BatchDistance
+from pymc_vcc.inference.noise import SensorNoise
+from pymc_vcc.inference.priors import Prior
+from pymc_vcc.inference.pymc.likelihood import add_likelihood
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.simulator import Simulator
 from pymc_vcc.physics.solvers import METHODS
 from pymc_vcc.physics.unit import Unit, load_unit
 
@@ -254,3 +260,41 @@ def write_netcdf(data: xr.DataTree | xr.Dataset, path: Path) -> None:
     """Save a DataTree or Dataset as netCDF, atomically (reloads with ``xarray`` / ArviZ)."""
     with atomic_path(path) as partial:
         data.to_netcdf(partial, engine="h5netcdf")
+
+
+def add_observed_node(
+    simulator: Simulator,
+    observed: xr.Dataset,
+    prior: Prior,
+    settings: StudySettings,
+    *,
+    likelihood: bool,
+    epsilon: float,
+    sensor_noise: SensorNoise | None,
+    distance: str | BatchDistance = "ks",
+) -> None:
+    """Add a study's observed node ``outputs`` to the current PyMC model: the exact likelihood
+    under ``sensor_noise`` (known scales), or the ABC ``distance`` with a kernel of width
+    ``epsilon`` on simulations with ``sensor_noise`` added."""
+    if likelihood:
+        if sensor_noise is None:
+            raise ValueError("the likelihood needs a sensor_noise")
+        add_likelihood(
+            "outputs",
+            simulator,
+            observed,
+            sensor_noise=sensor_noise,
+            prior=prior,
+            time_limit_s=settings.time_limit,
+        )
+    else:
+        add_simulator(
+            "outputs",
+            simulator,
+            observed,
+            prior=prior,
+            epsilon=epsilon,
+            sensor_noise=sensor_noise,
+            distance=distance,
+            time_limit_s=settings.time_limit,
+        )

@@ -30,8 +30,6 @@ from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
-from pymc_vcc.inference.pymc.likelihood import add_likelihood
-from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.physics.cycles import OUTPUT_IDS
@@ -44,7 +42,13 @@ from pymc_vcc.plots import (
     plot_prior_posterior,
     save_figure,
 )
-from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_netcdf
+from pymc_vcc.studies.common import (
+    StudySettings,
+    add_observed_node,
+    holds_output_folder,
+    write_json,
+    write_netcdf,
+)
 
 SENSITIVE = ("M0", "CF_VOL", "CF_POW", "CF_PREF", "CF_LEV")
 """Parameters the paper found well identified (Fig. 5), shown first in the KDE figures."""
@@ -184,26 +188,15 @@ def smc_sequential_calibration(
         sampler_seed, prior_seed = (int(x) for x in stage_seed.generate_state(2))
         prior = first_prior if k == 0 else GMMPrior.fit(trees[-1], first_prior, seed=prior_seed)
         with pm.Model():
-            if likelihood:
-                assert sensor_noise is not None
-                add_likelihood(
-                    "outputs",
-                    simulator,
-                    observed,
-                    sensor_noise=sensor_noise,
-                    prior=prior,
-                    time_limit_s=settings.time_limit,
-                )
-            else:
-                add_simulator(
-                    "outputs",
-                    simulator,
-                    observed,
-                    prior=prior,
-                    epsilon=epsilon,
-                    sensor_noise=sensor_noise,
-                    time_limit_s=settings.time_limit,
-                )
+            add_observed_node(
+                simulator,
+                observed,
+                prior,
+                settings,
+                likelihood=likelihood,
+                epsilon=epsilon,
+                sensor_noise=sensor_noise,
+            )
             tree = sample_smc_abc(
                 draws,
                 executor=executor,

@@ -26,8 +26,6 @@ from pymc_vcc.execution.progress import progress_enabled
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
-from pymc_vcc.inference.pymc.likelihood import add_likelihood
-from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.reference_table import ReferenceTable, simulate_table, table_rejection
 from pymc_vcc.inference.rejection import abc_rejection
@@ -36,6 +34,7 @@ from pymc_vcc.physics.unit import Unit
 from pymc_vcc.plots import plot_charge_posteriors, save_figure
 from pymc_vcc.studies.common import (
     StudySettings,
+    add_observed_node,
     holds_output_folder,
     write_json,
     write_netcdf,
@@ -175,26 +174,16 @@ def calibrate_charge(
         )
         return tree, int(tree["sample_stats"]["n_simulations"])
     with pm.Model():
-        if sampler == "likelihood":
-            add_likelihood(
-                "outputs",
-                simulator,
-                observed,
-                sensor_noise=sensor_noise,
-                prior=prior,
-                time_limit_s=settings.time_limit,
-            )
-        else:
-            add_simulator(
-                "outputs",
-                simulator,
-                observed,
-                prior=prior,
-                epsilon=epsilon,
-                sensor_noise=sensor_noise,
-                distance=distance,
-                time_limit_s=settings.time_limit,
-            )
+        add_observed_node(
+            simulator,
+            observed,
+            prior,
+            settings,
+            likelihood=sampler == "likelihood",
+            epsilon=epsilon,
+            sensor_noise=sensor_noise,
+            distance=distance,
+        )
         tree = sample_smc_abc(
             smc_draws or settings.work.smc_draws,
             executor=executor,
