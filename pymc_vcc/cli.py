@@ -115,7 +115,8 @@ def _estimate(args: argparse.Namespace) -> int:
         sensor_noise=_sensor_noise(args),
     )
     text = (
-        f"{result.format_table()}\n\n{result.n_simulations} simulations, "
+        f"{result.format_table()}\n\n{result.n_simulations} simulations "
+        f"({' + '.join(map(str, result.simulations))} by dataset), "
         f"{result.wall_seconds:.0f} s (sd ratio: posterior sd / sd of the uniform Table III prior)"
     )
     return _report(args, text, result.summary())

@@ -152,6 +152,7 @@ def test_estimate_with_smc_and_cvode(tmp_path, capsys):
     main([*command, "--method", "smc", "--particles", "4", "--epsilon", "0.05"])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert 2 * 4 <= summary["n_simulations"] < 2 * 4 * 100
+    assert sum(summary["simulations_per_dataset"]) == summary["n_simulations"]
     assert len(summary["sd_ratio"]) == 2 and len(summary["sd_ratio"][1]) == 26
     assert all(0 <= ratio < 1.5 for ratio in summary["sd_ratio"][0].values())
     tree = xr.open_datatree(out / "predictive_1.nc", engine="h5netcdf")

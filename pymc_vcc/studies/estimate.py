@@ -72,7 +72,7 @@ class EstimationResult:
         uncalibrated: dataset 2's profile simulated with dataset 1's true parameters.
         contraction: posterior sd / sd of the first (uniform) prior, per parameter and dataset.
         covered: whether each truth lies in its central 95 % posterior interval, per dataset.
-        n_simulations: forward simulations run by the samplers.
+        simulations: forward simulations the sampler ran, per dataset.
         wall_seconds: wall time of the whole study, s.
     """
 
@@ -82,9 +82,14 @@ class EstimationResult:
     uncalibrated: xr.Dataset
     contraction: list[dict[str, float]]
     covered: list[dict[str, bool]]
-    n_simulations: int
+    simulations: list[int]
     wall_seconds: float
     files: list[str] = field(default_factory=list)
+
+    @property
+    def n_simulations(self) -> int:
+        """Forward simulations run by the samplers over both datasets."""
+        return sum(self.simulations)
 
     def summary(self) -> dict:
         """The JSON summary: truths, posterior means, contraction, coverage of the truths by
@@ -100,6 +105,7 @@ class EstimationResult:
             "truth_in_95": self.covered,
             "n_truths_in_95": [sum(flags.values()) for flags in self.covered],
             "n_simulations": self.n_simulations,
+            "simulations_per_dataset": self.simulations,
             "wall_seconds": round(self.wall_seconds, 2),
         }
 
@@ -330,7 +336,7 @@ def estimation_study(
         covered=[
             _covered(tree, truth) for tree, truth in zip(calibration.trees, truths, strict=True)
         ],
-        n_simulations=sum(int(tree["sample_stats"]["n_simulations"]) for tree in calibration.trees),
+        simulations=[int(tree["sample_stats"]["n_simulations"]) for tree in calibration.trees],
         wall_seconds=time.perf_counter() - started,
     )
     if settings.out is not None:
