@@ -113,6 +113,7 @@ def _estimate(args: argparse.Namespace) -> int:
         smc_epsilon=args.epsilon,
         smc_draws=args.particles,
         sensor_noise=_sensor_noise(args),
+        distance=args.distance,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations "
@@ -318,6 +319,8 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pymc-vcc``, one sub-command per job."""
+    from pymc_vcc.inference.distances import BATCH_DISTANCES
+
     parser = argparse.ArgumentParser(
         prog="pymc-vcc",
         description="Bayesian calibration of dynamic vapor-compression-cycle models.",
@@ -356,7 +359,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--epsilon",
         type=float,
         default=0.01,
-        help="SMC-ABC: width of the Gaussian kernel on the KS distance (default 0.01)",
+        help="SMC-ABC: width of the Gaussian kernel on the distance (default 0.01)",
+    )
+    estimate.add_argument(
+        "--distance",
+        choices=list(BATCH_DISTANCES),
+        default="ks",
+        help="ABC distance: the paper's KS, Wasserstein-1 of the values, or windowed (10 s "
+        "means, time-aligned) (default ks)",
     )
     estimate.add_argument(
         "--particles",

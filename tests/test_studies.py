@@ -14,11 +14,12 @@ import xarray as xr
 
 from pymc_vcc.cli import main
 from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.inference.distances import BATCH_DISTANCES, windowed_distances
 from pymc_vcc.inference.likelihood import log_likelihood
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.series import prepare_observed
-from pymc_vcc.studies import StudySettings, leak_study
+from pymc_vcc.studies import StudySettings, estimation_study, leak_study
 from pymc_vcc.studies.estimate import smc_sequential_calibration
 from pymc_vcc.studies.leak import leak_alarm
 from pymc_vcc.testing import SensorProblem
@@ -145,13 +146,21 @@ def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys
     assert predictive["posterior_predictive"].attrs["noise"] == 0  # smooth bands
 
 
-def test_estimate_with_smc_and_cvode(tmp_path, capsys):
+def test_estimate_with_smc_cvode_and_the_windowed_distance(tmp_path, capsys, monkeypatch):
+    calls = []
+
+    def windowed_spy(sims, obs):
+        calls.append(sims.shape[0])
+        return windowed_distances(sims, obs)
+
+    monkeypatch.setitem(BATCH_DISTANCES, "windowed", windowed_spy)
     out = tmp_path / "estimate"
     command = ["estimate", "--budget", "smoke", "--out", str(out), "--json", "--solver", "cvode"]
-    command += ["--executor", "serial"]
+    command += ["--executor", "serial", "--distance", "windowed"]
     main([*command, "--method", "smc", "--particles", "4", "--epsilon", "0.05"])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert 2 * 4 <= summary["n_simulations"] < 2 * 4 * 100
+    assert sum(calls) >= summary["n_simulations"]  # every simulation measured by the spy
     assert sum(summary["simulations_per_dataset"]) == summary["n_simulations"]
     assert len(summary["sd_ratio"]) == 2 and len(summary["sd_ratio"][1]) == 26
     assert all(0 <= ratio < 1.5 for ratio in summary["sd_ratio"][0].values())
@@ -193,6 +202,12 @@ def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stag
         assert draws.mean() == pytest.approx(mean, abs=0.1 * sd)
         assert draws.std() == pytest.approx(sd, rel=0.1)
     assert result.trees[1]["prior"]["M0"].size == 600
+
+
+def test_estimate_refuses_an_unknown_distance_before_any_work(tmp_path):
+    with pytest.raises(ValueError, match=r"distance must be one of .*, got 'l2'"):
+        estimation_study(StudySettings(budget="smoke", out=tmp_path / "e"), distance="l2")
+    assert not (tmp_path / "e" / "checkpoints").exists()
 
 
 def test_estimate_on_the_likelihood_needs_sensor_noise(tmp_path, capsys):

@@ -165,3 +165,12 @@ def windowed_distances(sims: np.ndarray, obs: np.ndarray, window: int = 10) -> n
 
     gaps = (means(sims) - means(obs)[np.newaxis]) / _output_scales(obs)[np.newaxis]
     return np.sqrt((gaps**2).mean(axis=2)).mean(axis=1)
+
+
+BATCH_DISTANCES: dict[str, BatchDistance] = {
+    "ks": ks_distances,
+    "wasserstein": wasserstein_distances,
+    "windowed": windowed_distances,
+}
+"""The ABC distances a study can be asked for by name: the paper's KS, Wasserstein-1 and the
+time-aligned windowed distance."""

@@ -11,10 +11,12 @@ sensor noise if given), and dataset 2 is also simulated with dataset 1's true pa
 uncalibrated model of Fig. 8).
 
 Three samplers (``method``): the paper's two-phase ABC rejection (Table I's budget), PyMC's
-SMC-ABC on the same KS distance with a Gaussian kernel of width ε, all particles of a stage
+SMC-ABC on the same distance with a Gaussian kernel of width ε, all particles of a stage
 simulated in parallel (:func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`), which tempers
 towards the posterior instead of discarding 95 % of its simulations, or the same tempered SMC
-on the exact likelihood of noisy data under known sensor noise (``"likelihood"``).
+on the exact likelihood of noisy data under known sensor noise (``"likelihood"``). Both ABC
+samplers use the paper's KS distance unless ``distance`` names another (Wasserstein-1, or the
+time-aligned windowed distance).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import pymc as pm
 import xarray as xr
 
 from pymc_vcc.execution.executors import Executor
+from pymc_vcc.inference.distances import BATCH_DISTANCES, BatchDistance, ks_distances
 from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
@@ -181,11 +184,12 @@ def smc_sequential_calibration(
     seed: np.random.SeedSequence,
     sensor_noise: SensorNoise | None = None,
     likelihood: bool = False,
+    distance: BatchDistance = ks_distances,
 ) -> SequentialResult:
     """Algorithm 1 with tempered SMC: each dataset's posterior, fitted by a Gaussian mixture, is
-    the next dataset's prior. SMC-ABC on the KS distance, or with ``likelihood`` the exact
-    likelihood under ``sensor_noise`` (known scales). Each tree also gets a ``prior`` group of
-    ``draws`` prior draws."""
+    the next dataset's prior. SMC-ABC on ``distance`` (default the paper's KS), or with
+    ``likelihood`` the exact likelihood under ``sensor_noise`` (known scales). Each tree also
+    gets a ``prior`` group of ``draws`` prior draws."""
     trees: list[xr.DataTree] = []
     priors: list[Prior] = []
     for k, (observed, stage_seed) in enumerate(
@@ -202,6 +206,7 @@ def smc_sequential_calibration(
                 likelihood=likelihood,
                 epsilon=epsilon,
                 sensor_noise=sensor_noise,
+                distance=distance,
             )
             tree = sample_smc_abc(
                 draws,
@@ -237,6 +242,7 @@ def estimation_study(
     smc_epsilon: float = 0.01,
     smc_draws: int | None = None,
     sensor_noise: SensorNoise | None = None,
+    distance: str = "ks",
 ) -> EstimationResult:
     """Sequential calibration of all 26 parameters on two simulated datasets (Figs. 5 to 8).
 
@@ -249,15 +255,19 @@ def estimation_study(
         max_attempts: reference draws tried until both datasets simulate successfully.
         method: ``"rejection"`` (the paper's, Table I's budget), ``"smc"`` (SMC-ABC) or
             ``"likelihood"`` (tempered SMC on the exact likelihood; needs ``sensor_noise``).
-        smc_epsilon: width ε of SMC-ABC's Gaussian kernel on the KS distance (in [0, 1]).
+        smc_epsilon: width ε of SMC-ABC's Gaussian kernel on the distance.
         smc_draws: SMC particles per dataset (default: the budget's ``smc_draws``).
         sensor_noise: noise of the sensors, added to the reference data (with the seed) and
             calibrated as learnable scales ``sigma_<output>`` in engineering units, in place of
             the paper's relative ν (with ``"likelihood"``: known scales); None: noise-free data
             and ν (the paper).
+        distance: the ABC distance, a name of
+            :data:`~pymc_vcc.inference.distances.BATCH_DISTANCES` (``"ks"``: the paper's).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
+    if distance not in BATCH_DISTANCES:
+        raise ValueError(f"distance must be one of {list(BATCH_DISTANCES)}, got {distance!r}")
     likelihood = method == "likelihood"
     if likelihood and sensor_noise is None:
         raise ValueError(
@@ -298,6 +308,7 @@ def estimation_study(
                 seed=sampler_seed,
                 sensor_noise=sensor_noise,
                 likelihood=likelihood,
+                distance=BATCH_DISTANCES[distance],
             )
         else:
             calibration = sequential_calibration(
@@ -306,6 +317,7 @@ def estimation_study(
                 observed,
                 noise=noise,
                 sensor_noise=sensor_noise,
+                distance=BATCH_DISTANCES[distance],
                 executor=executor,
                 checkpoint=settings.checkpoint_folder("estimate"),
                 seed=sampler_seed,
