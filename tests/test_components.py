@@ -15,7 +15,7 @@ from pymc_vcc.physics.components.compressor import (
     shell_loss,
     volumetric_efficiency,
 )
-from pymc_vcc.physics.components.density import QUALITY_BAND, cell_state
+from pymc_vcc.physics.components.density import QUALITY_BAND, cell_state, fillet_memo
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature, fan_operating_point
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
@@ -330,8 +330,24 @@ def test_moist_air_by_hand():
     assert wet == pytest.approx(200.0 / 1006.0 * 2.45e6 * (0.0112 - W_wall) * effectiveness, 0.01)
 
 
+def _cell(tables, p, h):
+    """:func:`cell_state` with a fresh memo: nothing carried over from another call."""
+    return cell_state(tables, p, h, fillet_memo())
+
+
+def test_cell_state_memo_is_exact_across_cells_and_pressures(tables):
+    """One memo shared by the cells of both zones (as in a right-hand side) gives bit for bit
+    what a fresh memo gives, in and out of both bands, as the pressure alternates."""
+    memo = fillet_memo()
+    for p in (2.7e6, 1.0e6, 2.7e6, 1.0e6 * (1 + 1e-7)):
+        _, h_l, h_v, _, _ = saturation_state(tables, p)
+        for x in (-0.15, -0.05, 0.0, 0.04, 0.5, 0.93, 1.0, 1.06, 1.2):
+            h = h_l + x * (h_v - h_l)
+            assert cell_state(tables, p, h, memo) == _cell(tables, p, h)
+
+
 def _zone(tables, p, hs):
-    props = np.array([cell_state(tables, p, h) for h in hs])
+    props = np.array([_cell(tables, p, h) for h in hs])
     return props[:, 1].copy(), props[:, 2].copy(), props[:, 3].copy()
 
 
@@ -363,24 +379,24 @@ def test_cell_density_is_c2_across_the_saturation_lines(tables):
     _, h_l, h_v, _, _ = saturation_state(tables, p)
 
     def curvature(h, step):  # one-sided second difference of the density
-        rho = [cell_state(tables, p, h + k * step)[1] for k in range(3)]
+        rho = [_cell(tables, p, h + k * step)[1] for k in range(3)]
         return (rho[0] - 2.0 * rho[1] + rho[2]) / step**2
 
     for h_line in (h_l, h_v):
         width = QUALITY_BAND * (h_v - h_l)
         for h in (h_line - width * 1.0001, h_line + width * 1.0001):
-            assert cell_state(tables, p, h)[1] == state(tables, p, h)[1]
-        slopes = [cell_state(tables, p, h_line + side * width)[3] for side in (-1, 1)]
+            assert _cell(tables, p, h)[1] == state(tables, p, h)[1]
+        slopes = [_cell(tables, p, h_line + side * width)[3] for side in (-1, 1)]
         mean_curvature = abs(slopes[1] - slopes[0]) / (2.0 * width)
         for side in (-1.0, 1.0):
             edge = h_line + side * width
-            below, above = (cell_state(tables, p, edge + d)[1] for d in (-1e-6, 1e-6))
+            below, above = (_cell(tables, p, edge + d)[1] for d in (-1e-6, 1e-6))
             assert below == pytest.approx(above, rel=1e-9)
             outside, inside = curvature(edge, side), curvature(edge, -side)
             assert inside == pytest.approx(outside, abs=0.05 * max(abs(outside), mean_curvature))
         for h in np.linspace(h_line - 0.95 * width, h_line + 0.95 * width, 7):
-            _, _, rp, rh, _ = cell_state(tables, p, h)
-            fd_h = (cell_state(tables, p, h + 0.01)[1] - cell_state(tables, p, h - 0.01)[1]) / 0.02
-            fd_p = (cell_state(tables, p + 10, h)[1] - cell_state(tables, p - 10, h)[1]) / 20
+            _, _, rp, rh, _ = _cell(tables, p, h)
+            fd_h = (_cell(tables, p, h + 0.01)[1] - _cell(tables, p, h - 0.01)[1]) / 0.02
+            fd_p = (_cell(tables, p + 10, h)[1] - _cell(tables, p - 10, h)[1]) / 20
             assert rh == pytest.approx(fd_h, rel=1e-4)
             assert rp == pytest.approx(fd_p, rel=1e-3, abs=1e-9)

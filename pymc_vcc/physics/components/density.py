@@ -15,6 +15,7 @@ missed the mass rate by 2e-4 of the source in the wider quintic band).
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 from pymc_vcc.physics.refrigerant import density_h_derivatives, saturation_state, state
@@ -22,19 +23,44 @@ from pymc_vcc.physics.refrigerant import density_h_derivatives, saturation_state
 QUALITY_BAND = 0.1
 """Half-width of the fillet in quality on either side of the bubble (x = 0) and dew (x = 1)."""
 
+FILLET_ENDS = 9
+"""Numbers describing one fillet at one pressure: p (the memo's key, Pa), the band's start
+enthalpy and width (J/kg), and ρ, ∂ρ/∂t, ∂²ρ/∂t² at both band edges, t = (h - start)/width."""
+
 
 @njit(cache=True, error_model="numpy")
-def _fillet(tables, p: float, h: float, centre: float, band: float) -> tuple[float, float]:
+def fillet_memo() -> np.ndarray:
+    """An empty memo for :func:`cell_state`: the fillet ends of both saturation lines (bubble,
+    dew) at p, p + dp and p - dp. The ends depend on the pressure alone, so all cells of a zone
+    share them; a memo is valid for one set of tables."""
+    return np.full((2, 3, FILLET_ENDS), np.nan)
+
+
+@njit(cache=True, error_model="numpy")
+def _fillet_ends(tables, p: float, centre: float, band: float, ends: np.ndarray) -> None:
+    """Write the fillet ends around the saturation line ``centre`` (quality 0 or 1) at ``p``."""
     sat = saturation_state(tables, p)
     latent = sat[2] - sat[1]
     width = 2.0 * band * latent
     start = sat[1] + (centre - band) * latent
     rho_a, d_a, c_a = density_h_derivatives(tables, p, start)
     rho_b, d_b, c_b = density_h_derivatives(tables, p, start + width)
-    d_a *= width  # derivatives in t = (h - start) / width
-    d_b *= width
-    c_a *= width * width
-    c_b *= width * width
+    ends[0] = p
+    ends[1] = start
+    ends[2] = width
+    ends[3] = rho_a
+    ends[4] = d_a * width  # derivatives in t = (h - start) / width
+    ends[5] = c_a * (width * width)
+    ends[6] = rho_b
+    ends[7] = d_b * width
+    ends[8] = c_b * (width * width)
+
+
+@njit(cache=True, error_model="numpy")
+def _fillet(ends: np.ndarray, h: float) -> tuple[float, float]:
+    """(ρ, ∂ρ/∂h) of the quintic Hermite fillet with these ends at enthalpy ``h``."""
+    start, width = ends[1], ends[2]
+    rho_a, d_a, c_a, rho_b, d_b, c_b = ends[3], ends[4], ends[5], ends[6], ends[7], ends[8]
     t = (h - start) / width
     t2 = t * t
     t3 = t2 * t
@@ -68,15 +94,23 @@ def _band_centre(x: float, band: float) -> float:
 
 
 @njit(cache=True, error_model="numpy")
-def cell_state(tables, p: float, h: float) -> tuple[float, float, float, float, float]:
+def cell_state(
+    tables, p: float, h: float, memo: np.ndarray
+) -> tuple[float, float, float, float, float]:
     """(T K, ρ kg/m³, ∂ρ/∂p s²/m², ∂ρ/∂h kg² s²/m⁵... i.e. (kg/m³)/(J/kg), unclipped quality)
-    like ``refrigerant.state`` but with the C² density near the saturation lines."""
+    like ``refrigerant.state`` but with the C² density near the saturation lines; ``memo``
+    (from :func:`fillet_memo`) keeps the fillet ends of the latest pressure."""
     T, rho, drho_dp, drho_dh, x = state(tables, p, h)
     centre = _band_centre(x, QUALITY_BAND)
     if centre < 0.0:
         return T, rho, drho_dp, drho_dh, x
-    rho, drho_dh = _fillet(tables, p, h, centre, QUALITY_BAND)
+    ends = memo[int(centre)]
     dp = 1e-6 * p
-    up = _fillet(tables, p + dp, h, centre, QUALITY_BAND)[0]
-    down = _fillet(tables, p - dp, h, centre, QUALITY_BAND)[0]
+    if ends[0, 0] != p:
+        _fillet_ends(tables, p, centre, QUALITY_BAND, ends[0])
+        _fillet_ends(tables, p + dp, centre, QUALITY_BAND, ends[1])
+        _fillet_ends(tables, p - dp, centre, QUALITY_BAND, ends[2])
+    rho, drho_dh = _fillet(ends[0], h)
+    up = _fillet(ends[1], h)[0]
+    down = _fillet(ends[2], h)[0]
     return T, rho, (up - down) / (2.0 * dp), drho_dh, x

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 from numba import njit
 
-from pymc_vcc.physics.components.density import cell_state
+from pymc_vcc.physics.components.density import cell_state, fillet_memo
 from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import saturation_state
 
@@ -223,16 +223,16 @@ def place_charge(
 
 
 @njit(cache=True, error_model="numpy")
-def cell_row(y, zones, i, tables, props):
+def cell_row(y, zones, i, tables, props, memo):
     """Properties of cell ``i`` (cells numbered zone after zone) into column ``i`` of
-    ``props``."""
+    ``props``; ``memo`` as for :func:`~pymc_vcc.physics.components.density.cell_state`."""
     zone = 0
     k = i
     while k >= zones[zone, 1]:
         k -= zones[zone, 1]
         zone += 1
     p_index = zones[zone, 0]
-    T, rho, drho_dp, drho_dh, x = cell_state(tables, y[p_index], y[p_index + 1 + k])
+    T, rho, drho_dp, drho_dh, x = cell_state(tables, y[p_index], y[p_index + 1 + k], memo)
     props[0, i] = T
     props[1, i] = rho
     props[2, i] = drho_dp
@@ -244,8 +244,9 @@ def cell_row(y, zones, i, tables, props):
 def cell_properties(y, zones, tables, props):
     """Fill ``props`` (shape (N_PROPERTIES, cells)) for every cell; False if a property left
     the tables."""
+    memo = fillet_memo()
     for i in range(props.shape[1]):
-        cell_row(y, zones, i, tables, props)
+        cell_row(y, zones, i, tables, props, memo)
     return bool(np.isfinite(props[1]).all())
 
 
@@ -281,8 +282,9 @@ def perturb(y, work, j, zones, tables, props):
     step = 1e-7 * max(abs(y[j]), 1.0)
     work[j] = y[j] + step
     first, last = column_cells(zones, j)
+    memo = fillet_memo()
     for i in range(first, last + 1):
-        cell_row(work, zones, i, tables, props)
+        cell_row(work, zones, i, tables, props, memo)
     return step
 
 

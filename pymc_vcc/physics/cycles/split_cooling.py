@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from pymc_vcc.physics.components.compressor import compressor, protection_speed_factor
-from pymc_vcc.physics.components.density import cell_state
+from pymc_vcc.physics.components.density import cell_state, fillet_memo
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
@@ -336,13 +336,14 @@ def total_mass(y, constants, tables):
     at = c.layout
     n = at.h_liquid_line - at.h_cond
     p_c, p_e = y[at.p_cond], y[at.p_evap]
+    memo = fillet_memo()
     mass = 0.0
     for i in range(n):
-        mass += c.condenser.cell_volume * cell_state(tables, p_c, y[at.h_cond + i])[1]
-        mass += c.evaporator.cell_volume * cell_state(tables, p_e, y[at.h_evap + i])[1]
-    mass += c.liquid_line.volume * cell_state(tables, p_c, y[at.h_liquid_line])[1]
-    mass += c.vapor_line.volume * cell_state(tables, p_e, y[at.h_vapor_line])[1]
-    mass += c.tank.volume * cell_state(tables, p_e, y[at.h_tank])[1]
+        mass += c.condenser.cell_volume * cell_state(tables, p_c, y[at.h_cond + i], memo)[1]
+        mass += c.evaporator.cell_volume * cell_state(tables, p_e, y[at.h_evap + i], memo)[1]
+    mass += c.liquid_line.volume * cell_state(tables, p_c, y[at.h_liquid_line], memo)[1]
+    mass += c.vapor_line.volume * cell_state(tables, p_e, y[at.h_vapor_line], memo)[1]
+    mass += c.tank.volume * cell_state(tables, p_e, y[at.h_tank], memo)[1]
     return mass
 
 
