@@ -152,7 +152,7 @@ def simulate(
     charge = model.charge(c)
     if done.any():
         evaluated = np.full((times.size, model.n_eval), np.nan)
-        evaluated[done] = model.outputs_along(states[done], controls[done], c, tables)
+        evaluated[done] = model.outputs_along(states[done], controls[done], c, tables, diagnostics)
         for k, name in enumerate(values):
             values[name] = evaluated[:, k]
         diagnostic = list(model.output_info) + list(model.diagnostic_info)

@@ -126,7 +126,7 @@ def _run_kernels(unit: Unit) -> None:
     dydt = np.empty(y.size)
     model.evaluate(y, u, c, tables, dydt, np.empty(model.n_eval))
     model.jacobian(y, u, c, tables, dydt.copy())
-    model.outputs_along(y[np.newaxis, :], u[np.newaxis, :], c, tables)
+    model.outputs_along(y[np.newaxis, :], u[np.newaxis, :], c, tables, False)
     xr.Dataset({"y": ("time", y)})  # xarray imports its array backends on first use (seconds)
 
 

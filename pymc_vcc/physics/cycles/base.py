@@ -134,7 +134,9 @@ class CycleModel(ABC):
     * ``evaluate(y, u, c, tables, dydt, out) -> bool``: dy/dt into ``dydt``, outputs then
       diagnostics into ``out``; False when a property left the tables;
     * ``jacobian(y, u, c, tables, f0) -> ndarray``: ∂f/∂y given f0 = f(y);
-    * ``outputs_along(ys, us, c, tables) -> ndarray``: outputs and diagnostics row by row;
+    * ``outputs_along(ys, us, c, tables, rates) -> ndarray``: outputs and diagnostics row by
+      row; with ``rates`` False those that need the walls' and zones' balances (the heats)
+      may be NaN;
     * ``total_mass(y, c, tables) -> float``: refrigerant mass, kg.
     """
 

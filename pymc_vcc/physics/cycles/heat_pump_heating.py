@@ -115,8 +115,9 @@ def evaluate(y, u, constants, tables, dydt, out):
 
 
 @njit(cache=True, error_model="numpy")
-def balances(y, u, c, tables, props, dydt, out):
-    """:func:`evaluate` given the cell properties ``props`` of every cell."""
+def balances(y, u, c, tables, props, dydt, out, rates=True):
+    """:func:`evaluate` given the cell properties ``props`` of every cell; with ``rates``
+    False the outputs alone (walls and zones skipped: ``dydt`` untouched, the heats NaN)."""
     at = c.layout
     n = at.h_liquid_line - at.h_cond
     opening, speed, T_amb, T_ind = u[0], u[1], u[2], u[3]
@@ -182,78 +183,82 @@ def balances(y, u, c, tables, props, dydt, out):
     error = c.controller.m0 - mass
     m_src = c.controller.kp * error + c.controller.ki * z
 
-    # ---- walls and air: indoor air over the condenser, outdoor air over the evaporator
-    T_air_c = air_inlet_temperature(T_ind, cond.fan_power, n * cond.air_capacity)
-    T_air_e = air_inlet_temperature(T_amb, evap.fan_power, n * evap.air_capacity)
-    src_c = np.zeros(nc)
-    src_e = np.zeros(ne)
-    q_cond = 0.0
-    q_evap = 0.0
-    flow_c = abs(m_comp) / cond.nominal_mass_flow
-    flow_e = abs(m_valve) / evap.nominal_mass_flow
-    x_in_e = (h_zc[nc - 1] - sat_e[1]) / (sat_e[2] - sat_e[1])  # quality entering the evaporator
-    T_in_e = state(tables, p_e, h_zc[nc - 1])[0]
-    for i in range(n):
-        k = i + 1  # condenser cell i is cell k of the high-side zone (inlet: cell k - 1)
-        tw = y[at.Tw_cond + i]
-        q_ref = coil_cell_heat(
-            tables,
-            p_c,
-            cond,
-            tw,
-            flow_c,
-            h_zc[k - 1],
-            x_c[k - 1],
-            T_c[k - 1],
-            h_zc[k],
-            x_c[k],
-            T_c[k],
-        )
-        q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
-        dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
-        src_c[k] = q_ref
-        q_cond -= q_ref
-        tw = y[at.Tw_evap + i]
-        h_in, x_in, T_in = (
-            (h_zc[nc - 1], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
-        )
-        q_ref = coil_cell_heat(
-            tables, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
-        )
-        q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
-        dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
-        src_e[i] = q_ref
-        q_evap += q_ref
+    q_cond = q_evap = np.nan
+    if rates:
+        # ---- walls and air: indoor air over the condenser, outdoor air over the evaporator
+        T_air_c = air_inlet_temperature(T_ind, cond.fan_power, n * cond.air_capacity)
+        T_air_e = air_inlet_temperature(T_amb, evap.fan_power, n * evap.air_capacity)
+        src_c = np.zeros(nc)
+        src_e = np.zeros(ne)
+        q_cond = 0.0
+        q_evap = 0.0
+        flow_c = abs(m_comp) / cond.nominal_mass_flow
+        flow_e = abs(m_valve) / evap.nominal_mass_flow
+        x_in_e = (h_zc[nc - 1] - sat_e[1]) / (
+            sat_e[2] - sat_e[1]
+        )  # quality entering the evaporator
+        T_in_e = state(tables, p_e, h_zc[nc - 1])[0]
+        for i in range(n):
+            k = i + 1  # condenser cell i is cell k of the high-side zone (inlet: cell k - 1)
+            tw = y[at.Tw_cond + i]
+            q_ref = coil_cell_heat(
+                tables,
+                p_c,
+                cond,
+                tw,
+                flow_c,
+                h_zc[k - 1],
+                x_c[k - 1],
+                T_c[k - 1],
+                h_zc[k],
+                x_c[k],
+                T_c[k],
+            )
+            q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
+            dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
+            src_c[k] = q_ref
+            q_cond -= q_ref
+            tw = y[at.Tw_evap + i]
+            h_in, x_in, T_in = (
+                (h_zc[nc - 1], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
+            )
+            q_ref = coil_cell_heat(
+                tables, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
+            )
+            q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
+            dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
+            src_e[i] = q_ref
+            q_evap += q_ref
 
-    # ---- refrigerant zones
-    src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
-    src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[nc - 1] - h_ze[0])
-    src_e[ne - 1] -= m_comp * (h_suc - h_ze[ne - 1])
-    dydt[at.p_cond] = zone_derivatives(
-        vol_c,
-        rho_c,
-        props[2, :nc],
-        props[3, :nc],
-        h_zc,
-        src_c,
-        m_comp + m_src,
-        m_valve,
-        FLOW_EPS,
-        dydt[at.h_vapor_line : at.h_vapor_line + nc],
-    )
-    dydt[at.p_evap] = zone_derivatives(
-        vol_e,
-        rho_e,
-        props[2, nc:],
-        props[3, nc:],
-        h_ze,
-        src_e,
-        m_valve,
-        m_comp,
-        FLOW_EPS,
-        dydt[at.h_evap : at.h_evap + ne],
-    )
-    dydt[at.z] = error
+        # ---- refrigerant zones
+        src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
+        src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[nc - 1] - h_ze[0])
+        src_e[ne - 1] -= m_comp * (h_suc - h_ze[ne - 1])
+        dydt[at.p_cond] = zone_derivatives(
+            vol_c,
+            rho_c,
+            props[2, :nc],
+            props[3, :nc],
+            h_zc,
+            src_c,
+            m_comp + m_src,
+            m_valve,
+            FLOW_EPS,
+            dydt[at.h_vapor_line : at.h_vapor_line + nc],
+        )
+        dydt[at.p_evap] = zone_derivatives(
+            vol_e,
+            rho_e,
+            props[2, nc:],
+            props[3, nc:],
+            h_ze,
+            src_e,
+            m_valve,
+            m_comp,
+            FLOW_EPS,
+            dydt[at.h_evap : at.h_evap + ne],
+        )
+        dydt[at.z] = error
 
     # ---- outputs and diagnostics, in the order of OUTPUT_INFO and DIAGNOSTIC_INFO
     out[0] = T_d
@@ -283,7 +288,7 @@ def balances(y, u, c, tables, props, dydt, out):
     out[24] = dp_vap
     out[25] = 0.0  # the indoor coil condenses: no latent load
     out[26] = 1.0
-    return bool(np.isfinite(dydt).all())
+    return not rates or bool(np.isfinite(dydt).all())
 
 
 @njit(cache=True, error_model="numpy")
@@ -309,13 +314,17 @@ def jacobian(y, u, constants, tables, f0):
 
 
 @njit(cache=True, error_model="numpy")
-def outputs_along(ys, us, constants, tables):
-    """Outputs and diagnostics at each row of states ``ys`` with the matching inputs ``us``."""
+def outputs_along(ys, us, constants, tables, rates):
+    """Outputs and diagnostics at each row of states ``ys`` with the matching inputs ``us``;
+    with ``rates`` False the heats are NaN (see :func:`balances`), at half the cost."""
+    c = constants[0]
+    props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
     result = np.empty((ys.shape[0], N_EVAL))
     dydt = np.empty(ys.shape[1])
     out = np.empty(N_EVAL)
     for k in range(ys.shape[0]):
-        evaluate(ys[k], us[k], constants, tables, dydt, out)
+        cell_properties(ys[k], c.layout.zones, tables, props)
+        balances(ys[k], us[k], c, tables, props, dydt, out, rates)
         result[k] = out
     return result
 

@@ -112,8 +112,9 @@ def evaluate(y, u, constants, tables, dydt, out):
 
 
 @njit(cache=True, error_model="numpy")
-def balances(y, u, c, tables, props, dydt, out):
-    """:func:`evaluate` given the cell properties ``props`` of every cell."""
+def balances(y, u, c, tables, props, dydt, out, rates=True):
+    """:func:`evaluate` given the cell properties ``props`` of every cell; with ``rates``
+    False the outputs alone (walls and zones skipped: ``dydt`` untouched, the heats NaN)."""
     at = c.layout
     n = at.h_liquid_line - at.h_cond
     opening, speed, T_amb, T_ind, rh_ind = u[0], u[1], u[2], u[3], u[4]
@@ -183,85 +184,87 @@ def balances(y, u, c, tables, props, dydt, out):
     error = c.controller.m0 - mass
     m_src = c.controller.kp * error + c.controller.ki * z
 
-    # ---- walls and air: outdoor air over the condenser, indoor air over the evaporator
-    T_air_c = air_inlet_temperature(T_amb, cond.fan_power, n * cond.air_capacity)
-    T_air_e = air_inlet_temperature(T_ind, evap.fan_power, n * evap.air_capacity)
-    src_c = np.zeros(nc)
-    src_e = np.zeros(ne)
-    q_cond = 0.0
-    q_evap = 0.0
-    q_sensible = 0.0
-    q_latent = 0.0
-    W_ind = humidity_ratio(T_ind, rh_ind)
-    flow_c = abs(m_comp) / cond.nominal_mass_flow
-    flow_e = abs(m_valve) / evap.nominal_mass_flow
-    sat_c = saturation_state(tables, p_c)
-    x_in_c = (h_d - sat_c[1]) / (sat_c[2] - sat_c[1])  # qualities entering each coil
-    x_in_e = (h_zc[n] - sat_e[1]) / (sat_e[2] - sat_e[1])
-    T_in_c = state(tables, p_c, h_d)[0]
-    T_in_e = state(tables, p_e, h_zc[n])[0]
-    for i in range(n):
-        tw = y[at.Tw_cond + i]
-        h_in, x_in, T_in = (
-            (h_d, x_in_c, T_in_c) if i == 0 else (h_zc[i - 1], x_c[i - 1], T_c[i - 1])
-        )
-        q_ref = coil_cell_heat(
-            tables, p_c, cond, tw, flow_c, h_in, x_in, T_in, h_zc[i], x_c[i], T_c[i]
-        )
-        q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
-        dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
-        src_c[i] = q_ref
-        q_cond -= q_ref
-        tw = y[at.Tw_evap + i]
-        h_in, x_in, T_in = (
-            (h_zc[n], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
-        )
-        q_ref = coil_cell_heat(
-            tables, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
-        )
-        q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
-        q_sensible += q_air
-        if rh_ind > 0.0:
-            q_wet = latent_heat(
-                evap.air_capacity, c.air_specific_heat, W_ind, tw, evap.htc_air, evap.air_area
+    q_cond = q_evap = q_latent = q_sensible = np.nan
+    if rates:
+        # ---- walls and air: outdoor air over the condenser, indoor air over the evaporator
+        T_air_c = air_inlet_temperature(T_amb, cond.fan_power, n * cond.air_capacity)
+        T_air_e = air_inlet_temperature(T_ind, evap.fan_power, n * evap.air_capacity)
+        src_c = np.zeros(nc)
+        src_e = np.zeros(ne)
+        q_cond = 0.0
+        q_evap = 0.0
+        q_sensible = 0.0
+        q_latent = 0.0
+        W_ind = humidity_ratio(T_ind, rh_ind)
+        flow_c = abs(m_comp) / cond.nominal_mass_flow
+        flow_e = abs(m_valve) / evap.nominal_mass_flow
+        sat_c = saturation_state(tables, p_c)
+        x_in_c = (h_d - sat_c[1]) / (sat_c[2] - sat_c[1])  # qualities entering each coil
+        x_in_e = (h_zc[n] - sat_e[1]) / (sat_e[2] - sat_e[1])
+        T_in_c = state(tables, p_c, h_d)[0]
+        T_in_e = state(tables, p_e, h_zc[n])[0]
+        for i in range(n):
+            tw = y[at.Tw_cond + i]
+            h_in, x_in, T_in = (
+                (h_d, x_in_c, T_in_c) if i == 0 else (h_zc[i - 1], x_c[i - 1], T_c[i - 1])
             )
-            q_latent += q_wet
-            q_air += q_wet
-        dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
-        src_e[i] = q_ref
-        q_evap += q_ref
+            q_ref = coil_cell_heat(
+                tables, p_c, cond, tw, flow_c, h_in, x_in, T_in, h_zc[i], x_c[i], T_c[i]
+            )
+            q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
+            dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
+            src_c[i] = q_ref
+            q_cond -= q_ref
+            tw = y[at.Tw_evap + i]
+            h_in, x_in, T_in = (
+                (h_zc[n], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
+            )
+            q_ref = coil_cell_heat(
+                tables, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
+            )
+            q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
+            q_sensible += q_air
+            if rh_ind > 0.0:
+                q_wet = latent_heat(
+                    evap.air_capacity, c.air_specific_heat, W_ind, tw, evap.htc_air, evap.air_area
+                )
+                q_latent += q_wet
+                q_air += q_wet
+            dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
+            src_e[i] = q_ref
+            q_evap += q_ref
 
-    # ---- refrigerant zones
-    src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
-    src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[n] - h_ze[0])
-    src_e[n + 1] -= m_comp * (h_suc - h_ze[n + 1])
-    dp_c = zone_derivatives(
-        vol_c,
-        rho_c,
-        rp_c,
-        rh_c,
-        h_zc,
-        src_c,
-        m_comp + m_src,
-        m_valve,
-        FLOW_EPS,
-        dydt[at.h_cond : at.h_cond + nc],
-    )
-    dp_e = zone_derivatives(
-        vol_e,
-        rho_e,
-        rp_e,
-        rh_e,
-        h_ze,
-        src_e,
-        m_valve,
-        m_comp,
-        FLOW_EPS,
-        dydt[at.h_evap : at.h_evap + ne],
-    )
-    dydt[at.p_cond] = dp_c
-    dydt[at.p_evap] = dp_e
-    dydt[at.z] = error
+        # ---- refrigerant zones
+        src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
+        src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[n] - h_ze[0])
+        src_e[n + 1] -= m_comp * (h_suc - h_ze[n + 1])
+        dp_c = zone_derivatives(
+            vol_c,
+            rho_c,
+            rp_c,
+            rh_c,
+            h_zc,
+            src_c,
+            m_comp + m_src,
+            m_valve,
+            FLOW_EPS,
+            dydt[at.h_cond : at.h_cond + nc],
+        )
+        dp_e = zone_derivatives(
+            vol_e,
+            rho_e,
+            rp_e,
+            rh_e,
+            h_ze,
+            src_e,
+            m_valve,
+            m_comp,
+            FLOW_EPS,
+            dydt[at.h_evap : at.h_evap + ne],
+        )
+        dydt[at.p_cond] = dp_c
+        dydt[at.p_evap] = dp_e
+        dydt[at.z] = error
 
     # ---- outputs and diagnostics, in the order of OUTPUT_INFO and DIAGNOSTIC_INFO
     out[0] = T_d
@@ -291,7 +294,7 @@ def balances(y, u, c, tables, props, dydt, out):
     out[24] = dp_vap
     out[25] = q_latent
     out[26] = q_sensible / (q_sensible + q_latent)
-    return bool(np.isfinite(dydt).all())
+    return not rates or bool(np.isfinite(dydt).all())
 
 
 @njit(cache=True, error_model="numpy")
@@ -317,13 +320,17 @@ def jacobian(y, u, constants, tables, f0):
 
 
 @njit(cache=True, error_model="numpy")
-def outputs_along(ys, us, constants, tables):
-    """Outputs and diagnostics at each row of states ``ys`` with the matching inputs ``us``."""
+def outputs_along(ys, us, constants, tables, rates):
+    """Outputs and diagnostics at each row of states ``ys`` with the matching inputs ``us``;
+    with ``rates`` False the heats are NaN (see :func:`balances`), at half the cost."""
+    c = constants[0]
+    props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
     result = np.empty((ys.shape[0], N_EVAL))
     dydt = np.empty(ys.shape[1])
     out = np.empty(N_EVAL)
     for k in range(ys.shape[0]):
-        evaluate(ys[k], us[k], constants, tables, dydt, out)
+        cell_properties(ys[k], c.layout.zones, tables, props)
+        balances(ys[k], us[k], c, tables, props, dydt, out, rates)
         result[k] = out
     return result
 
