@@ -114,6 +114,7 @@ def _estimate(args: argparse.Namespace) -> int:
         smc_draws=args.particles,
         sensor_noise=_sensor_noise(args),
         distance=args.distance,
+        kernel_steps=args.kernel_steps,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations "
@@ -372,6 +373,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--particles",
         type=int,
         help="smc and likelihood: particles per dataset (default: the budget's)",
+    )
+    estimate.add_argument(
+        "--kernel-steps",
+        type=int,
+        help="smc and likelihood: at most this many mutation steps per stage (default: until "
+        "the particles decorrelate, PyMC's rule)",
     )
     estimate.set_defaults(handler=_estimate)
 

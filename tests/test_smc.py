@@ -94,6 +94,28 @@ def test_gaussian_location_matches_the_exact_abc_posterior():
     assert 0.85 < draws.std() / sd < 1.15
 
 
+def test_a_step_cap_bounds_each_stage_and_keeps_the_exact_posterior():
+    sim = GaussianLocation()
+    observed = sim({"mu": 0.5}, np.random.default_rng(1))
+    epsilon = 0.5
+    exact = sim.posterior(observed)
+    mean, sd = exact.mean(), exact.std() * np.sqrt(1 + epsilon**2)
+    draws = 400
+    with pm.Model():
+        add_simulator("y", sim, observed, epsilon=epsilon, distance=sim.distance)
+        with pytest.raises(ValueError, match="max_steps must be a positive integer"):
+            sample_smc_abc(draws=draws, executor="serial", max_steps=0, **QUIET)
+        capped = sample_smc_abc(draws=draws, executor="serial", random_seed=0, max_steps=2, **QUIET)
+        free = sample_smc_abc(draws=draws, executor="serial", random_seed=0, **QUIET)
+    per_stage = capped.sample_stats["simulations"].values.ravel()
+    assert per_stage[0] <= 3 * draws and (per_stage[1:] <= 2 * draws).all()
+    assert free.sample_stats["simulations"].values.max() > 2 * draws  # the cap did bind
+    assert capped.sample_stats.attrs["max_steps"] == 2
+    posterior = capped.posterior["mu"].values.ravel()
+    assert abs(posterior.mean() - mean) < 0.3 * sd
+    assert 0.85 < posterior.std() / sd < 1.15
+
+
 def test_linear_gaussian_matches_the_exact_abc_posterior():
     sim = LinearGaussian()
     observed = sim({"a": 0.2, "b": 0.1}, np.random.default_rng(2))  # far inside the box

@@ -210,6 +210,14 @@ def test_estimate_refuses_an_unknown_distance_before_any_work(tmp_path):
     assert not (tmp_path / "e" / "checkpoints").exists()
 
 
+def test_estimate_refuses_a_kernel_step_cap_below_one_before_any_work(tmp_path, capsys):
+    out = tmp_path / "e"
+    assert main(["estimate", "--method", "smc", "--kernel-steps", "0", "--out", str(out)]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "kernel_steps must be a positive integer" in error
+    assert not (out / "checkpoints").exists()
+
+
 def test_estimate_on_the_likelihood_needs_sensor_noise(tmp_path, capsys):
     assert main(["estimate", "--method", "likelihood", "--out", str(tmp_path / "e")]) == 2
     error = capsys.readouterr().err

@@ -33,7 +33,7 @@ from pymc_vcc.inference.distances import BATCH_DISTANCES, BatchDistance, ks_dist
 from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
-from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.inference.pymc.smc import check_max_steps, sample_smc_abc
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
@@ -185,11 +185,13 @@ def smc_sequential_calibration(
     sensor_noise: SensorNoise | None = None,
     likelihood: bool = False,
     distance: BatchDistance = ks_distances,
+    max_steps: int | None = None,
 ) -> SequentialResult:
     """Algorithm 1 with tempered SMC: each dataset's posterior, fitted by a Gaussian mixture, is
     the next dataset's prior. SMC-ABC on ``distance`` (default the paper's KS), or with
-    ``likelihood`` the exact likelihood under ``sensor_noise`` (known scales). Each tree also
-    gets a ``prior`` group of ``draws`` prior draws."""
+    ``likelihood`` the exact likelihood under ``sensor_noise`` (known scales), at most
+    ``max_steps`` mutation steps per stage. Each tree also gets a ``prior`` group of ``draws``
+    prior draws."""
     trees: list[xr.DataTree] = []
     priors: list[Prior] = []
     for k, (observed, stage_seed) in enumerate(
@@ -213,6 +215,7 @@ def smc_sequential_calibration(
                 executor=executor,
                 random_seed=sampler_seed,
                 checkpoint=settings.checkpoint(f"estimate_smc_{k}"),
+                max_steps=max_steps,
                 progressbar=bool(settings.progress),
             )
         draws_of_prior = prior.sample(draws, np.random.default_rng(prior_seed))
@@ -243,6 +246,7 @@ def estimation_study(
     smc_draws: int | None = None,
     sensor_noise: SensorNoise | None = None,
     distance: str = "ks",
+    kernel_steps: int | None = None,
 ) -> EstimationResult:
     """Sequential calibration of all 26 parameters on two simulated datasets (Figs. 5 to 8).
 
@@ -263,11 +267,14 @@ def estimation_study(
             and ν (the paper).
         distance: the ABC distance, a name of
             :data:`~pymc_vcc.inference.distances.BATCH_DISTANCES` (``"ks"``: the paper's).
+        kernel_steps: ``"smc"`` and ``"likelihood"``: at most this many mutation steps per
+            stage (default: until the particles decorrelate, PyMC's rule).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
     if distance not in BATCH_DISTANCES:
         raise ValueError(f"distance must be one of {list(BATCH_DISTANCES)}, got {distance!r}")
+    check_max_steps(kernel_steps, "kernel_steps")
     likelihood = method == "likelihood"
     if likelihood and sensor_noise is None:
         raise ValueError(
@@ -309,6 +316,7 @@ def estimation_study(
                 sensor_noise=sensor_noise,
                 likelihood=likelihood,
                 distance=BATCH_DISTANCES[distance],
+                max_steps=kernel_steps,
             )
         else:
             calibration = sequential_calibration(

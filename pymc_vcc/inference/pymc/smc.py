@@ -211,6 +211,15 @@ def _simulation_key(point: np.ndarray, node: int, seed: np.random.SeedSequence) 
     return digest.hexdigest()
 
 
+def check_max_steps(max_steps: int | None, name: str = "max_steps") -> int | None:
+    """``max_steps`` if it is None or a positive integer, else ValueError naming it ``name``."""
+    if max_steps is not None and (
+        isinstance(max_steps, bool) or int(max_steps) != max_steps or max_steps < 1
+    ):
+        raise ValueError(f"{name} must be a positive integer or None, got {max_steps!r}")
+    return max_steps
+
+
 class ParallelIMH(IMH):
     """PyMC's IMH SMC kernel with the simulations of all particles run as one parallel batch.
 
@@ -226,6 +235,9 @@ class ParallelIMH(IMH):
             closes it, fingerprinting the run: :func:`sample_smc_abc` does): each finished
             simulation is persisted there, and one already there is not run again.
         correlation_threshold: as for ``pymc.smc.kernels.IMH``.
+        max_steps: at most this many independent-MH steps per stage (default: PyMC's rule
+            alone, stepping until the particles' correlation with the stage's start stops
+            falling, which in many dimensions with low acceptance takes dozens of steps).
         **kwargs: the stock kernel's arguments (``draws``, ``model``, ``threshold``, ...).
     """
 
@@ -244,8 +256,10 @@ class ParallelIMH(IMH):
         executor: Executor | None = None,
         checkpoint: LikelihoodStore | None = None,
         correlation_threshold=0.01,
+        max_steps: int | None = None,
         **kwargs,
     ) -> None:
+        self.max_steps = check_max_steps(max_steps)
         compile_kwargs = dict(kwargs.get("compile_kwargs") or {})
         super().__init__(*args, correlation_threshold=correlation_threshold, **kwargs)
         if executor is not None and not isinstance(executor, Executor):
@@ -405,6 +419,8 @@ class ParallelIMH(IMH):
             accepted_steps.append(accepted)
             self.n_steps += 1
 
+            if self.max_steps is not None and len(accepted_steps) >= self.max_steps:
+                break
             pearson_r = correlation.get(self.tempered_posterior)
             if np.mean((old_correlation - pearson_r) > self.correlation_threshold) > 0.9:
                 old_correlation = pearson_r
@@ -434,6 +450,7 @@ class ParallelIMH(IMH):
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
             "failure_examples": " | ".join(self.failure_reasons),
             "median_log_likelihood": float(np.median(self.likelihood_logp)),
+            "max_steps": self.max_steps or 0,  # 0: no cap
             "executor": repr(self.executor),
         }
 
@@ -458,11 +475,19 @@ def _describe(function: Callable[..., Any]) -> str:
 
 
 def _run_settings(
-    model: Model, draws: int, chains: int, threshold: float, correlation: float
+    model: Model,
+    draws: int,
+    chains: int,
+    threshold: float,
+    correlation: float,
+    max_steps: int | None,
 ) -> dict[str, Any]:
     """What a resumed run must share with the checkpointed one (besides the seed)."""
     nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
+    # a step cap is named only when set, so runs checkpointed before it existed still resume
+    capped = {} if max_steps is None else {"max_steps": int(max_steps)}
     return {
+        **capped,
         "sampler": "smc_abc",
         "draws": int(draws),
         "chains": int(chains),
@@ -490,6 +515,7 @@ def sample_smc_abc(
     model: Model | None = None,
     threshold: float = 0.5,
     correlation_threshold: float = 0.01,
+    max_steps: int | None = None,
     progressbar: bool = True,
     **kwargs: Any,
 ) -> DataTree:
@@ -513,6 +539,7 @@ def sample_smc_abc(
             ``random_seed``, the seed is drawn once and kept in the checkpoint.
         model: the PyMC model (default: the current context).
         threshold, correlation_threshold: as for ``pm.sample_smc``'s IMH kernel.
+        max_steps: at most this many mutation steps per stage (see :class:`ParallelIMH`).
         progressbar: show PyMC's progress bar.
         **kwargs: other ``pm.sample_smc`` arguments (``start``, ``idata_kwargs``, ...).
 
@@ -530,6 +557,7 @@ def sample_smc_abc(
         raise ValueError(f"chains must be a positive integer, got {chains}")
     if int(draws) != draws or draws < 2:
         raise ValueError(f"draws must be an integer >= 2, got {draws}")
+    check_max_steps(max_steps)
     kwargs.setdefault("compute_convergence_checks", chains > 1)
     model = modelcontext(model)
     store = None
@@ -543,7 +571,7 @@ def sample_smc_abc(
                 f"random_seed must be a non-negative integer or None with a checkpoint, got "
                 f"{random_seed!r}"
             )
-        settings = _run_settings(model, draws, chains, threshold, correlation_threshold)
+        settings = _run_settings(model, draws, chains, threshold, correlation_threshold, max_steps)
         store = LikelihoodStore(checkpoint, settings, random_seed)
         random_seed = store.entropy
     n_parameters = sum(model.initial_point()[v.name].size for v in model.value_vars)
@@ -571,6 +599,7 @@ def sample_smc_abc(
                 checkpoint=store,
                 threshold=threshold,
                 correlation_threshold=correlation_threshold,
+                max_steps=max_steps,
                 **kwargs,
             )
         return _with_run_summary(standard_layout(tree, model), model)
