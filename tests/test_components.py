@@ -45,6 +45,7 @@ from pymc_vcc.physics.refrigerant import (
     entropy,
     h_from_ps,
     load_refrigerant,
+    saturation_point,
     saturation_state,
     state,
 )
@@ -280,7 +281,9 @@ def test_coil_cell_heat_is_exact_across_blends_and_saturation_lines(tables):
     ]
     exact = np.trapezoid(flux, fine) / (h_out - h_in)
     ends = [(h, quality(h), state(tables, p, h)[0]) for h in (h_in, h_out)]
-    heat = coil_cell_heat(tables, p, coil, T_wall, 1.0, *ends[0], *ends[1])
+    heat = coil_cell_heat(
+        tables, saturation_point(tables, p), p, coil, T_wall, 1.0, *ends[0], *ends[1]
+    )
     assert heat == pytest.approx(exact, rel=1e-4)
     # one Simpson rule over the whole cell is 8 % off (its middle is two-phase)
     T_mid = state(tables, p, 0.5 * (h_in + h_out))[0]
@@ -303,9 +306,9 @@ def test_coil_cell_heat_is_exact_across_blends_and_saturation_lines(tables):
         1000.0,
         1.0,
     )
-    assert coil_cell_heat(tables, p, coil, T_wall, 1.0, *inside[0], *inside[1]) == pytest.approx(
-        plain, rel=1e-12
-    )
+    assert coil_cell_heat(
+        tables, saturation_point(tables, p), p, coil, T_wall, 1.0, *inside[0], *inside[1]
+    ) == pytest.approx(plain, rel=1e-12)
 
 
 def test_soft_cap():
@@ -332,7 +335,7 @@ def test_moist_air_by_hand():
 
 def _cell(tables, p, h):
     """:func:`cell_state` with a fresh memo: nothing carried over from another call."""
-    return cell_state(tables, p, h, fillet_memo())
+    return cell_state(tables, saturation_point(tables, p), p, h, fillet_memo())
 
 
 def test_cell_state_memo_is_exact_across_cells_and_pressures(tables):
@@ -343,7 +346,9 @@ def test_cell_state_memo_is_exact_across_cells_and_pressures(tables):
         _, h_l, h_v, _, _ = saturation_state(tables, p)
         for x in (-0.15, -0.05, 0.0, 0.04, 0.5, 0.93, 1.0, 1.06, 1.2):
             h = h_l + x * (h_v - h_l)
-            assert cell_state(tables, p, h, memo) == _cell(tables, p, h)
+            assert cell_state(tables, saturation_point(tables, p), p, h, memo) == _cell(
+                tables, p, h
+            )
 
 
 def _zone(tables, p, hs):

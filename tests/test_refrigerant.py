@@ -11,14 +11,17 @@ from pymc_vcc.physics.refrigerant import (
     SUPPORTED_FLUIDS,
     TableResolution,
     density_h_derivatives,
+    density_h_derivatives_at,
     entropy,
     h_from_ps,
     h_from_pT,
     load_refrigerant,
     p_sat_from_T,
+    saturation_point,
     saturation_state,
     state,
     state_array,
+    state_at,
 )
 from pymc_vcc.physics.refrigerant.cache import CACHE_ENV, cache_directory, load_tables
 
@@ -351,6 +354,20 @@ def test_numba_kernels_return_nan_outside_the_tables(fluids):
     assert np.isnan(h_from_ps(tables, 20e5, 1e4))
     assert np.isnan(p_sat_from_T(tables, 400.0))
     assert np.isnan(p_sat_from_T(tables, 150.0))
+
+
+def test_one_saturation_point_serves_every_lookup_at_its_pressure(fluids):
+    """Lookups sharing a pressure's saturation point (as a zone's cells do) give bit for bit
+    the one-off lookups, across the dome, and NaN outside the tables."""
+    tables = fluids["R410A"].tables
+    for p in (0.5e5, 8e5, 27e5, 49e5, np.nan):
+        point = saturation_point(tables, p)
+        assert point.inside == (8e5 <= p <= 27e5)
+        for h in np.linspace(1.0e5, 5.5e5, 41):
+            np.testing.assert_array_equal(state_at(tables, point, p, h), state(tables, p, h))
+            np.testing.assert_array_equal(
+                density_h_derivatives_at(tables, point, p, h), density_h_derivatives(tables, p, h)
+            )
 
 
 def test_cache_build_then_reload_gives_identical_tables(tmp_path, monkeypatch):

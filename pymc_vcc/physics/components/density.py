@@ -18,7 +18,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from pymc_vcc.physics.refrigerant import density_h_derivatives, saturation_state, state
+from pymc_vcc.physics.refrigerant import (
+    SaturationPoint,
+    density_h_derivatives_at,
+    saturation_point,
+    state_at,
+)
 
 QUALITY_BAND = 0.1
 """Half-width of the fillet in quality on either side of the bubble (x = 0) and dew (x = 1)."""
@@ -39,12 +44,12 @@ def fillet_memo() -> np.ndarray:
 @njit(cache=True, error_model="numpy")
 def _fillet_ends(tables, p: float, centre: float, band: float, ends: np.ndarray) -> None:
     """Write the fillet ends around the saturation line ``centre`` (quality 0 or 1) at ``p``."""
-    sat = saturation_state(tables, p)
-    latent = sat[2] - sat[1]
+    sat = saturation_point(tables, p)
+    latent = sat.h_v - sat.h_l
     width = 2.0 * band * latent
-    start = sat[1] + (centre - band) * latent
-    rho_a, d_a, c_a = density_h_derivatives(tables, p, start)
-    rho_b, d_b, c_b = density_h_derivatives(tables, p, start + width)
+    start = sat.h_l + (centre - band) * latent
+    rho_a, d_a, c_a = density_h_derivatives_at(tables, sat, p, start)
+    rho_b, d_b, c_b = density_h_derivatives_at(tables, sat, p, start + width)
     ends[0] = p
     ends[1] = start
     ends[2] = width
@@ -95,12 +100,13 @@ def _band_centre(x: float, band: float) -> float:
 
 @njit(cache=True, error_model="numpy")
 def cell_state(
-    tables, p: float, h: float, memo: np.ndarray
+    tables, sat: SaturationPoint, p: float, h: float, memo: np.ndarray
 ) -> tuple[float, float, float, float, float]:
     """(T K, ρ kg/m³, ∂ρ/∂p s²/m², ∂ρ/∂h kg² s²/m⁵... i.e. (kg/m³)/(J/kg), unclipped quality)
-    like ``refrigerant.state`` but with the C² density near the saturation lines; ``memo``
-    (from :func:`fillet_memo`) keeps the fillet ends of the latest pressure."""
-    T, rho, drho_dp, drho_dh, x = state(tables, p, h)
+    like ``refrigerant.state`` but with the C² density near the saturation lines. ``sat`` is the
+    :func:`~pymc_vcc.physics.refrigerant.saturation_point` of ``p``; ``memo`` (from
+    :func:`fillet_memo`) keeps the fillet ends of the latest pressure."""
+    T, rho, drho_dp, drho_dh, x = state_at(tables, sat, p, h)
     centre = _band_centre(x, QUALITY_BAND)
     if centre < 0.0:
         return T, rho, drho_dp, drho_dh, x

@@ -24,7 +24,7 @@ from numba import njit
 
 from pymc_vcc.physics.components.density import cell_state, fillet_memo
 from pymc_vcc.physics.records import make_record
-from pymc_vcc.physics.refrigerant import saturation_state
+from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import SolverSettings, Unit
@@ -225,30 +225,36 @@ def place_charge(
 
 
 @njit(cache=True, error_model="numpy")
-def cell_row(y, zones, i, tables, props, memo):
-    """Properties of cell ``i`` (cells numbered zone after zone) into column ``i`` of
-    ``props``; ``memo`` as for :func:`~pymc_vcc.physics.components.density.cell_state`."""
+def zone_cells(y, zones, first, last, tables, props):
+    """Properties of cells ``first`` to ``last`` (cells numbered zone after zone; all of one
+    zone, so they share its pressure's saturation point) into those columns of ``props``."""
     zone = 0
-    k = i
+    k = first
     while k >= zones[zone, 1]:
         k -= zones[zone, 1]
         zone += 1
     p_index = zones[zone, 0]
-    T, rho, drho_dp, drho_dh, x = cell_state(tables, y[p_index], y[p_index + 1 + k], memo)
-    props[0, i] = T
-    props[1, i] = rho
-    props[2, i] = drho_dp
-    props[3, i] = drho_dh
-    props[4, i] = x
+    p = y[p_index]
+    sat = saturation_point(tables, p)
+    memo = fillet_memo()
+    for i in range(first, last + 1):
+        h = y[p_index + 1 + k + i - first]
+        T, rho, drho_dp, drho_dh, x = cell_state(tables, sat, p, h, memo)
+        props[0, i] = T
+        props[1, i] = rho
+        props[2, i] = drho_dp
+        props[3, i] = drho_dh
+        props[4, i] = x
 
 
 @njit(cache=True, error_model="numpy")
 def cell_properties(y, zones, tables, props):
     """Fill ``props`` (shape (N_PROPERTIES, cells)) for every cell; False if a property left
     the tables."""
-    memo = fillet_memo()
-    for i in range(props.shape[1]):
-        cell_row(y, zones, i, tables, props, memo)
+    first = 0
+    for zone in range(zones.shape[0]):
+        zone_cells(y, zones, first, first + zones[zone, 1] - 1, tables, props)
+        first += zones[zone, 1]
     return bool(np.isfinite(props[1]).all())
 
 
@@ -284,9 +290,8 @@ def perturb(y, work, j, zones, tables, props):
     step = 1e-7 * max(abs(y[j]), 1.0)
     work[j] = y[j] + step
     first, last = column_cells(zones, j)
-    memo = fillet_memo()
-    for i in range(first, last + 1):
-        cell_row(work, zones, i, tables, props, memo)
+    if first <= last:
+        zone_cells(work, zones, first, last, tables, props)
     return step
 
 

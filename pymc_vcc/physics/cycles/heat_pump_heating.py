@@ -62,7 +62,7 @@ from pymc_vcc.physics.cycles.split_unit import (
     split_unit_constants,
     suction_outlet,
 )
-from pymc_vcc.physics.refrigerant import p_sat_from_T, state
+from pymc_vcc.physics.refrigerant import p_sat_from_T, saturation_point, state, state_at
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import Unit
@@ -194,15 +194,17 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
         q_evap = 0.0
         flow_c = abs(m_comp) / cond.nominal_mass_flow
         flow_e = abs(m_valve) / evap.nominal_mass_flow
-        x_in_e = (h_zc[nc - 1] - sat_e[1]) / (
-            sat_e[2] - sat_e[1]
-        )  # quality entering the evaporator
-        T_in_e = state(tables, p_e, h_zc[nc - 1])[0]
+        point_c = saturation_point(tables, p_c)
+        point_e = saturation_point(tables, p_e)
+        # quality entering the evaporator
+        x_in_e = (h_zc[nc - 1] - sat_e[1]) / (sat_e[2] - sat_e[1])
+        T_in_e = state_at(tables, point_e, p_e, h_zc[nc - 1])[0]
         for i in range(n):
             k = i + 1  # condenser cell i is cell k of the high-side zone (inlet: cell k - 1)
             tw = y[at.Tw_cond + i]
             q_ref = coil_cell_heat(
                 tables,
+                point_c,
                 p_c,
                 cond,
                 tw,
@@ -223,7 +225,7 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
                 (h_zc[nc - 1], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
             )
             q_ref = coil_cell_heat(
-                tables, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
+                tables, point_e, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
             )
             q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
             dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity

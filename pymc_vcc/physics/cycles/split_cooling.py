@@ -58,7 +58,7 @@ from pymc_vcc.physics.cycles.split_unit import (
     split_unit_constants,
     suction_outlet,
 )
-from pymc_vcc.physics.refrigerant import p_sat_from_T, saturation_state, state
+from pymc_vcc.physics.refrigerant import p_sat_from_T, saturation_point, state, state_at
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import Unit
@@ -198,18 +198,19 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
         W_ind = humidity_ratio(T_ind, rh_ind)
         flow_c = abs(m_comp) / cond.nominal_mass_flow
         flow_e = abs(m_valve) / evap.nominal_mass_flow
-        sat_c = saturation_state(tables, p_c)
-        x_in_c = (h_d - sat_c[1]) / (sat_c[2] - sat_c[1])  # qualities entering each coil
+        point_c = saturation_point(tables, p_c)
+        point_e = saturation_point(tables, p_e)
+        x_in_c = (h_d - point_c.h_l) / (point_c.h_v - point_c.h_l)  # qualities entering each coil
         x_in_e = (h_zc[n] - sat_e[1]) / (sat_e[2] - sat_e[1])
-        T_in_c = state(tables, p_c, h_d)[0]
-        T_in_e = state(tables, p_e, h_zc[n])[0]
+        T_in_c = state_at(tables, point_c, p_c, h_d)[0]
+        T_in_e = state_at(tables, point_e, p_e, h_zc[n])[0]
         for i in range(n):
             tw = y[at.Tw_cond + i]
             h_in, x_in, T_in = (
                 (h_d, x_in_c, T_in_c) if i == 0 else (h_zc[i - 1], x_c[i - 1], T_c[i - 1])
             )
             q_ref = coil_cell_heat(
-                tables, p_c, cond, tw, flow_c, h_in, x_in, T_in, h_zc[i], x_c[i], T_c[i]
+                tables, point_c, p_c, cond, tw, flow_c, h_in, x_in, T_in, h_zc[i], x_c[i], T_c[i]
             )
             q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
             dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
@@ -220,7 +221,7 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
                 (h_zc[n], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
             )
             q_ref = coil_cell_heat(
-                tables, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
+                tables, point_e, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
             )
             q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
             q_sensible += q_air
@@ -343,14 +344,17 @@ def total_mass(y, constants, tables):
     at = c.layout
     n = at.h_liquid_line - at.h_cond
     p_c, p_e = y[at.p_cond], y[at.p_evap]
-    memo = fillet_memo()
+    sat_c, sat_e = saturation_point(tables, p_c), saturation_point(tables, p_e)
+    memo_c, memo_e = fillet_memo(), fillet_memo()
     mass = 0.0
     for i in range(n):
-        mass += c.condenser.cell_volume * cell_state(tables, p_c, y[at.h_cond + i], memo)[1]
-        mass += c.evaporator.cell_volume * cell_state(tables, p_e, y[at.h_evap + i], memo)[1]
-    mass += c.liquid_line.volume * cell_state(tables, p_c, y[at.h_liquid_line], memo)[1]
-    mass += c.vapor_line.volume * cell_state(tables, p_e, y[at.h_vapor_line], memo)[1]
-    mass += c.tank.volume * cell_state(tables, p_e, y[at.h_tank], memo)[1]
+        h_c, h_e = y[at.h_cond + i], y[at.h_evap + i]
+        mass += c.condenser.cell_volume * cell_state(tables, sat_c, p_c, h_c, memo_c)[1]
+        mass += c.evaporator.cell_volume * cell_state(tables, sat_e, p_e, h_e, memo_e)[1]
+    h_liquid, h_vapor, h_tank = y[at.h_liquid_line], y[at.h_vapor_line], y[at.h_tank]
+    mass += c.liquid_line.volume * cell_state(tables, sat_c, p_c, h_liquid, memo_c)[1]
+    mass += c.vapor_line.volume * cell_state(tables, sat_e, p_e, h_vapor, memo_e)[1]
+    mass += c.tank.volume * cell_state(tables, sat_e, p_e, h_tank, memo_e)[1]
     return mass
 
 

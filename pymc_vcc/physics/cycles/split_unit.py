@@ -30,7 +30,7 @@ from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_e
 from pymc_vcc.physics.cycles.base import StateLayout, quality_enthalpy
 from pymc_vcc.physics.parameters import TABLE_III
 from pymc_vcc.physics.records import record_array
-from pymc_vcc.physics.refrigerant import saturation_state, state
+from pymc_vcc.physics.refrigerant import saturation_state, state, state_at
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import HeatExchangerGeometry, Unit
@@ -318,10 +318,10 @@ def flow_through_drops(
 
 
 @njit(cache=True, error_model="numpy")
-def coil_cell_heat(tables, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T):
+def coil_cell_heat(tables, sat, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T):
     """Heat from the wall to one coil cell's refrigerant, W: the cell-mean flux, its enthalpy
     running linearly from its inlet (``h_in``, ``x_in``, ``T_in``) to its own state (``h``,
-    ``x``, ``T``) at pressure ``p``, by
+    ``x``, ``T``) at pressure ``p`` (saturation point ``sat``), by
     :func:`~pymc_vcc.physics.components.heat_transfer.cell_heat` on each stretch between the
     :data:`~pymc_vcc.physics.components.heat_transfer.FLUX_KINKS` it holds, weighted by
     length.
@@ -342,10 +342,10 @@ def coil_cell_heat(tables, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, 
                 continue  # not strictly ahead of this stretch's start and before the outlet
             x_b = edge
             h_b = h_in + (edge - x_in) / (x - x_in) * (h - h_in)
-            T_b = state(tables, p, h_b)[0]
+            T_b = state_at(tables, sat, p, h_b)[0]
         else:
             h_b, x_b, T_b = h, x, T
-        T_mid = state(tables, p, 0.5 * (h_a + h_b))[0]
+        T_mid = state_at(tables, sat, p, 0.5 * (h_a + h_b))[0]
         weight = (h_b - h_a) / (h - h_in) if h != h_in else 1.0
         total += weight * cell_heat(
             T_wall,

@@ -14,15 +14,19 @@ from pymc_vcc.physics.refrigerant.fluid import (
     load_refrigerant,
 )
 from pymc_vcc.physics.refrigerant.kernels import (
+    SaturationPoint,
     density_h_derivatives,
+    density_h_derivatives_at,
     enthalpy_bounds,
     entropy,
     h_from_ps,
     h_from_pT,
     p_sat_from_T,
+    saturation_point,
     saturation_state,
     state,
     state_array,
+    state_at,
 )
 from pymc_vcc.physics.refrigerant.tables import FluidSpec, PropertyTables, TableResolution
 
@@ -34,15 +38,19 @@ __all__ = [
     "PropertyTables",
     "Refrigerant",
     "Saturation",
+    "SaturationPoint",
     "TableResolution",
     "density_h_derivatives",
+    "density_h_derivatives_at",
     "enthalpy_bounds",
     "entropy",
     "h_from_pT",
     "h_from_ps",
     "load_refrigerant",
     "p_sat_from_T",
+    "saturation_point",
     "saturation_state",
     "state",
     "state_array",
+    "state_at",
 ]

@@ -8,6 +8,7 @@ extrapolated.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -34,6 +35,32 @@ from pymc_vcc.physics.refrigerant.tables import (
 )
 
 NAN = math.nan
+
+
+class SaturationPoint(NamedTuple):
+    """What every property lookup at one pressure shares (SI units; ``_p``: d/dp), from
+    :func:`saturation_point`: the cells of a pressure zone share one."""
+
+    inside: bool  # the pressure lies inside the tables (else every other field is NaN)
+    interval: int  # saturation-node interval holding p, its width and p's local coordinate
+    width: float
+    t: float
+    h_min: float  # enthalpy span of the tables at p
+    h_min_p: float
+    h_max: float
+    h_max_p: float
+    h_l: float  # bubble and dew enthalpies
+    h_l_p: float
+    h_v: float
+    h_v_p: float
+    T_b: float  # bubble and dew temperatures
+    T_d: float
+    rho_l: float  # bubble and dew densities
+    rho_l_p: float
+    rho_v: float
+    rho_v_p: float
+
+
 _MAX_ITERATIONS = 60
 
 
@@ -158,21 +185,25 @@ def _bicubic_xi(
 
 @njit(cache=True)
 def _region(
-    tables: PropertyTables, p: float, h: float, i: int, width: float, t: float, liquid: bool
+    tables: PropertyTables,
+    p: float,
+    h: float,
+    a: float,
+    a_p: float,
+    b: float,
+    b_p: float,
+    liquid: bool,
 ) -> tuple[np.ndarray, int, int, float, float, float, float, float, float]:
-    """Locate (p, h) in the liquid or vapour table.
+    """Locate (p, h) in the liquid or vapour table, whose enthalpy span at p runs from ``a`` to
+    ``b`` (with their slopes d/dp ``a_p`` and ``b_p``).
 
     Returns the table, cell indices, cell sizes, local coordinates, the width w of the region
     at p and the derivative d xi/dp at constant h.
     """
     if liquid:
-        a, a_p = _sat_curve(tables, H_MIN, i, width, t)
-        b, b_p = _sat_curve(tables, H_LIQ, i, width, t)
         table = tables.liquid
         xi_nodes = tables.liquid_xi
     else:
-        a, a_p = _sat_curve(tables, H_VAP, i, width, t)
-        b, b_p = _sat_curve(tables, H_MAX, i, width, t)
         table = tables.vapour
         xi_nodes = tables.vapour_xi
     w = b - a
@@ -188,8 +219,43 @@ def _region(
 
 
 @njit(cache=True)
+def _single_phase(
+    tables: PropertyTables, sat: SaturationPoint, p: float, h: float
+) -> tuple[np.ndarray, int, int, float, float, float, float, float, float]:
+    """:func:`_region` of (p, h) outside the dome (liquid below h_l, vapour above h_v), given
+    ``sat``, the :func:`saturation_point` of ``p``."""
+    if h < sat.h_l:
+        return _region(tables, p, h, sat.h_min, sat.h_min_p, sat.h_l, sat.h_l_p, True)
+    return _region(tables, p, h, sat.h_v, sat.h_v_p, sat.h_max, sat.h_max_p, False)
+
+
+@njit(cache=True)
 def _in_range(tables: PropertyTables, p: float) -> bool:
     return p >= tables.p_min and p <= tables.p_max
+
+
+@njit(cache=True)
+def saturation_point(tables: PropertyTables, p: float) -> SaturationPoint:
+    """The :class:`SaturationPoint` of pressure ``p``; pass it to :func:`state_at` and
+    :func:`density_h_derivatives_at` for every lookup at ``p``."""
+    if not _in_range(tables, p):
+        return SaturationPoint(
+            False, 0, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN,
+            NAN, NAN,
+        )  # fmt: skip
+    i, width, t = _sat_locate(tables, p)
+    h_min, h_min_p = _sat_curve(tables, H_MIN, i, width, t)
+    h_max, h_max_p = _sat_curve(tables, H_MAX, i, width, t)
+    h_l, h_l_p = _sat_curve(tables, H_LIQ, i, width, t)
+    h_v, h_v_p = _sat_curve(tables, H_VAP, i, width, t)
+    T_b, _ = _sat_curve(tables, T_BUBBLE, i, width, t)
+    T_d, _ = _sat_curve(tables, T_DEW, i, width, t)
+    rho_l, rho_l_p = _sat_curve(tables, RHO_LIQ, i, width, t)
+    rho_v, rho_v_p = _sat_curve(tables, RHO_VAP, i, width, t)
+    return SaturationPoint(
+        True, i, width, t, h_min, h_min_p, h_max, h_max_p, h_l, h_l_p, h_v, h_v_p, T_b, T_d,
+        rho_l, rho_l_p, rho_v, rho_v_p,
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -199,25 +265,24 @@ def state(tables: PropertyTables, p: float, h: float) -> tuple[float, float, flo
     K, kg/m3, kg/m3/Pa at constant h, kg/m3/(J/kg) at constant p, and the unclipped quality
     x = (h - h_l)/(h_v - h_l). NaNs outside the tables.
     """
-    if not _in_range(tables, p):
+    return state_at(tables, saturation_point(tables, p), p, h)
+
+
+@njit(cache=True)
+def state_at(
+    tables: PropertyTables, sat: SaturationPoint, p: float, h: float
+) -> tuple[float, float, float, float, float]:
+    """:func:`state` given ``sat``, the :func:`saturation_point` of ``p``."""
+    h_l, h_l_p, h_v, h_v_p = sat.h_l, sat.h_l_p, sat.h_v, sat.h_v_p
+    rho_l, rho_l_p, rho_v, rho_v_p = sat.rho_l, sat.rho_l_p, sat.rho_v, sat.rho_v_p
+    if not (sat.inside and h >= sat.h_min and h <= sat.h_max):
         return NAN, NAN, NAN, NAN, NAN
-    i, width, t = _sat_locate(tables, p)
-    h_min, _ = _sat_curve(tables, H_MIN, i, width, t)
-    h_max, _ = _sat_curve(tables, H_MAX, i, width, t)
-    if not (h >= h_min and h <= h_max):
-        return NAN, NAN, NAN, NAN, NAN
-    h_l, h_l_p = _sat_curve(tables, H_LIQ, i, width, t)
-    h_v, h_v_p = _sat_curve(tables, H_VAP, i, width, t)
     x = (h - h_l) / (h_v - h_l)
     if h < h_l or h > h_v:
-        table, ip, jx, dp, dxi, tp, rx, w, xi_p = _region(tables, p, h, i, width, t, h < h_l)
+        table, ip, jx, dp, dxi, tp, rx, w, xi_p = _single_phase(tables, sat, p, h)
         T, _, _ = _bicubic(table, PROP_T, ip, jx, dp, dxi, tp, rx)
         rho, rho_p, rho_xi = _bicubic(table, PROP_RHO, ip, jx, dp, dxi, tp, rx)
         return T, rho, rho_p + rho_xi * xi_p, rho_xi / w, x
-    T_b, _ = _sat_curve(tables, T_BUBBLE, i, width, t)
-    T_d, _ = _sat_curve(tables, T_DEW, i, width, t)
-    rho_l, rho_l_p = _sat_curve(tables, RHO_LIQ, i, width, t)
-    rho_v, rho_v_p = _sat_curve(tables, RHO_VAP, i, width, t)
     v_l = 1.0 / rho_l
     v_v = 1.0 / rho_v
     v_l_p = -rho_l_p * v_l * v_l
@@ -228,7 +293,7 @@ def state(tables: PropertyTables, p: float, h: float) -> tuple[float, float, flo
     rho = 1.0 / v
     v_p = v_l_p + x * (v_v_p - v_l_p) + (v_v - v_l) * x_p
     v_h = (v_v - v_l) / dh
-    return T_b + x * (T_d - T_b), rho, -rho * rho * v_p, -rho * rho * v_h, x
+    return sat.T_b + x * (sat.T_d - sat.T_b), rho, -rho * rho * v_p, -rho * rho * v_h, x
 
 
 @njit(cache=True)
@@ -238,21 +303,21 @@ def density_h_derivatives(tables: PropertyTables, p: float, h: float) -> tuple[f
     Single phase from the bicubic table; two-phase, v is linear in h, so ∂²ρ/∂h² =
     2 (∂ρ/∂h)² / ρ. NaNs outside the tables.
     """
-    if not _in_range(tables, p):
+    return density_h_derivatives_at(tables, saturation_point(tables, p), p, h)
+
+
+@njit(cache=True)
+def density_h_derivatives_at(
+    tables: PropertyTables, sat: SaturationPoint, p: float, h: float
+) -> tuple[float, float, float]:
+    """:func:`density_h_derivatives` given ``sat``, the :func:`saturation_point` of ``p``."""
+    h_l, h_v, rho_l, rho_v = sat.h_l, sat.h_v, sat.rho_l, sat.rho_v
+    if not (sat.inside and h >= sat.h_min and h <= sat.h_max):
         return NAN, NAN, NAN
-    i, width, t = _sat_locate(tables, p)
-    h_min, _ = _sat_curve(tables, H_MIN, i, width, t)
-    h_max, _ = _sat_curve(tables, H_MAX, i, width, t)
-    if not (h >= h_min and h <= h_max):
-        return NAN, NAN, NAN
-    h_l, _ = _sat_curve(tables, H_LIQ, i, width, t)
-    h_v, _ = _sat_curve(tables, H_VAP, i, width, t)
     if h < h_l or h > h_v:
-        table, ip, jx, dp, dxi, tp, rx, w, _ = _region(tables, p, h, i, width, t, h < h_l)
+        table, ip, jx, dp, dxi, tp, rx, w, _ = _single_phase(tables, sat, p, h)
         rho, rho_xi, rho_xixi = _bicubic_xi(table, PROP_RHO, ip, jx, dp, dxi, tp, rx)
         return rho, rho_xi / w, rho_xixi / (w * w)
-    rho_l, _ = _sat_curve(tables, RHO_LIQ, i, width, t)
-    rho_v, _ = _sat_curve(tables, RHO_VAP, i, width, t)
     v_h = (1.0 / rho_v - 1.0 / rho_l) / (h_v - h_l)
     rho = 1.0 / (1.0 / rho_l + (h - h_l) * v_h)
     drho_dh = -rho * rho * v_h
@@ -292,17 +357,12 @@ def enthalpy_bounds(tables: PropertyTables, p: float) -> tuple[float, float]:
 @njit(cache=True)
 def entropy(tables: PropertyTables, p: float, h: float) -> float:
     """Specific entropy at (p, h), J/(kg K); NaN outside the tables."""
-    if not _in_range(tables, p):
+    sat = saturation_point(tables, p)
+    i, width, t, h_l, h_v = sat.interval, sat.width, sat.t, sat.h_l, sat.h_v
+    if not (sat.inside and h >= sat.h_min and h <= sat.h_max):
         return NAN
-    i, width, t = _sat_locate(tables, p)
-    h_min, _ = _sat_curve(tables, H_MIN, i, width, t)
-    h_max, _ = _sat_curve(tables, H_MAX, i, width, t)
-    if not (h >= h_min and h <= h_max):
-        return NAN
-    h_l, _ = _sat_curve(tables, H_LIQ, i, width, t)
-    h_v, _ = _sat_curve(tables, H_VAP, i, width, t)
     if h < h_l or h > h_v:
-        table, ip, jx, dp, dxi, tp, rx, _, _ = _region(tables, p, h, i, width, t, h < h_l)
+        table, ip, jx, dp, dxi, tp, rx, _, _ = _single_phase(tables, sat, p, h)
         s, _, _ = _bicubic(table, PROP_S, ip, jx, dp, dxi, tp, rx)
         return s
     s_l, _ = _sat_curve(tables, S_LIQ, i, width, t)
