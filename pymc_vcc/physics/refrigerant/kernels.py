@@ -331,16 +331,8 @@ def saturation_state(tables: PropertyTables, p: float) -> tuple[float, float, fl
     For a pure fluid bubble and dew temperatures coincide; CoolProp's pseudo-pure R410A has a
     glide of about 0.1 K, and T_sat is their mean. NaNs outside the tables.
     """
-    if not _in_range(tables, p):
-        return NAN, NAN, NAN, NAN, NAN
-    i, width, t = _sat_locate(tables, p)
-    T_b, _ = _sat_curve(tables, T_BUBBLE, i, width, t)
-    T_d, _ = _sat_curve(tables, T_DEW, i, width, t)
-    h_l, _ = _sat_curve(tables, H_LIQ, i, width, t)
-    h_v, _ = _sat_curve(tables, H_VAP, i, width, t)
-    rho_l, _ = _sat_curve(tables, RHO_LIQ, i, width, t)
-    rho_v, _ = _sat_curve(tables, RHO_VAP, i, width, t)
-    return 0.5 * (T_b + T_d), h_l, h_v, rho_l, rho_v
+    sat = saturation_point(tables, p)
+    return 0.5 * (sat.T_b + sat.T_d), sat.h_l, sat.h_v, sat.rho_l, sat.rho_v
 
 
 @njit(cache=True)
