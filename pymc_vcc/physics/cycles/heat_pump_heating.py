@@ -150,7 +150,7 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
     rho_friction_e = coil_friction_density(rho_e, n)
 
     # ---- suction tank (bleed), pressure drops at the compressor's own flow, compressor
-    h_suc, level, sat_e = suction_outlet(tables, p_e, h_ze[n], rho_e[n], c)
+    h_suc, level = suction_outlet(tables, p_e, h_ze[n], rho_e[n], c)
     outlet = state(tables, p_e, h_suc)
     rho_out = outlet[1]
     speed = speed * protection_speed_factor(p_c, comp.p_protection_start, comp.p_protection_stop)
@@ -197,7 +197,7 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
         point_c = saturation_point(tables, p_c)
         point_e = saturation_point(tables, p_e)
         # quality entering the evaporator
-        x_in_e = (h_zc[nc - 1] - sat_e[1]) / (sat_e[2] - sat_e[1])
+        x_in_e = (h_zc[nc - 1] - point_e.h_l) / (point_e.h_v - point_e.h_l)
         T_in_e = state_at(tables, point_e, p_e, h_zc[nc - 1])[0]
         for i in range(n):
             k = i + 1  # condenser cell i is cell k of the high-side zone (inlet: cell k - 1)

@@ -151,7 +151,7 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
     rho_friction_e = coil_friction_density(rho_e, n)
 
     # ---- suction tank (bleed), pressure drops at the compressor's own flow, compressor
-    h_suc, level, sat_e = suction_outlet(tables, p_e, h_ze[n + 1], rho_e[n + 1], c)
+    h_suc, level = suction_outlet(tables, p_e, h_ze[n + 1], rho_e[n + 1], c)
     outlet = state(tables, p_e, h_suc)
     rho_out = outlet[1]
     speed = speed * protection_speed_factor(p_c, comp.p_protection_start, comp.p_protection_stop)
@@ -201,7 +201,7 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
         point_c = saturation_point(tables, p_c)
         point_e = saturation_point(tables, p_e)
         x_in_c = (h_d - point_c.h_l) / (point_c.h_v - point_c.h_l)  # qualities entering each coil
-        x_in_e = (h_zc[n] - sat_e[1]) / (sat_e[2] - sat_e[1])
+        x_in_e = (h_zc[n] - point_e.h_l) / (point_e.h_v - point_e.h_l)
         T_in_c = state_at(tables, point_c, p_c, h_d)[0]
         T_in_e = state_at(tables, point_e, p_e, h_zc[n])[0]
         for i in range(n):

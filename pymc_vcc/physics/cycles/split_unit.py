@@ -252,14 +252,14 @@ def _coil(
 
 @njit(cache=True, error_model="numpy")
 def suction_outlet(tables, p_e, h_tank, rho_tank, c):
-    """(enthalpy leaving the suction tank J/kg, its liquid level -, saturation state at
-    ``p_e``): vapour carrying the bleed liquid, the more the fuller the tank."""
+    """(enthalpy leaving the suction tank J/kg, its liquid level -): vapour carrying the bleed
+    liquid, the more the fuller the tank."""
     sat = saturation_state(tables, p_e)
     level = liquid_level(rho_tank, sat[3], sat[4])
     h_out = tank_outlet_enthalpy(
         h_tank, sat[1], sat[2], level, c.tank.bleed_fraction_full, TANK_WIDTH
     )
-    return h_out, level, sat
+    return h_out, level
 
 
 @njit(cache=True, error_model="numpy")
