@@ -17,6 +17,7 @@ from pathlib import Path
 
 from pymc_vcc import __version__
 from pymc_vcc.execution.executors import EXECUTOR_KINDS
+from pymc_vcc.inference.samplers import SAMPLERS, SMC_KERNELS
 from pymc_vcc.physics.solvers import METHODS
 
 
@@ -115,6 +116,7 @@ def _estimate(args: argparse.Namespace) -> int:
         sensor_noise=_sensor_noise(args),
         distance=args.distance,
         kernel_steps=args.kernel_steps,
+        kernel=args.kernel,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations "
@@ -273,7 +275,7 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
         "--method",
         "--sampler",
         dest="sampler",
-        choices=["rejection", "smc", "likelihood"],
+        choices=list(SAMPLERS),
         default="rejection",
         help="rejection (the paper's ABC), smc (SMC-ABC) or likelihood (exact likelihood under "
         "--sensor-noise, tempered SMC)",
@@ -345,7 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sensor_noise_option(estimate)
     estimate.add_argument(
         "--method",
-        choices=["rejection", "smc", "likelihood"],
+        choices=list(SAMPLERS),
         default="rejection",
         help="sampler: the paper's ABC rejection, SMC-ABC (far fewer simulations), or tempered "
         "SMC on the exact likelihood (needs --sensor-noise typical)",
@@ -379,6 +381,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         help="smc and likelihood: at most this many mutation steps per stage (default: until "
         "the particles decorrelate, PyMC's rule)",
+    )
+    estimate.add_argument(
+        "--kernel",
+        choices=list(SMC_KERNELS),
+        default="imh",
+        help="smc and likelihood: mutation kernel, imh (independent proposals from a Gaussian "
+        "fitted to the particles, PyMC's default) or mh (random-walk steps) (default imh)",
     )
     estimate.set_defaults(handler=_estimate)
 

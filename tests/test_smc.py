@@ -1,17 +1,18 @@
-"""SMC-ABC with the parallel IMH kernel: exactness, reproducibility, failures, chains."""
+"""SMC-ABC with the parallel IMH and MH kernels: exactness, reproducibility, failures, chains."""
 
 from __future__ import annotations
 
 import numpy as np
 import pymc as pm
 import pytest
+from pymc.smc.kernels import IMH, MH
 from scipy import stats
 
 from pymc_vcc.execution.executors import make_executor
 from pymc_vcc.inference.priors import GMMPrior
 from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import add_simulator
-from pymc_vcc.inference.pymc.smc import ParallelIMH, sample_smc_abc
+from pymc_vcc.inference.pymc.smc import ParallelIMH, ParallelMH, sample_smc_abc
 from pymc_vcc.testing import Flaky, GaussianLocation, LinearGaussian, ShiftedProfile
 
 QUIET = {"progressbar": False}
@@ -48,11 +49,12 @@ def deterministic_model():
     return model
 
 
-def test_same_seed_gives_the_stock_kernels_posterior(deterministic_model):
+@pytest.mark.parametrize(("parallel", "stock_kernel"), [(ParallelIMH, IMH), (ParallelMH, MH)])
+def test_same_seed_gives_the_stock_kernels_posterior(deterministic_model, parallel, stock_kernel):
     settings = {"draws": 150, "chains": 1, "random_seed": 11, **QUIET}
     with deterministic_model:
-        stock = pm.sample_smc(**settings, compute_convergence_checks=False)
-        ours = pm.sample_smc(kernel=ParallelIMH, **settings, compute_convergence_checks=False)
+        stock = pm.sample_smc(kernel=stock_kernel, **settings, compute_convergence_checks=False)
+        ours = pm.sample_smc(kernel=parallel, **settings, compute_convergence_checks=False)
     np.testing.assert_array_equal(ours.posterior["mu"].values, stock.posterior["mu"].values)
     np.testing.assert_array_equal(ours.sample_stats["beta"].values, stock.sample_stats["beta"])
     simulations = ours.sample_stats["simulations"].values
@@ -78,7 +80,7 @@ def test_results_do_not_depend_on_the_executor():
         assert name in parallel.sample_stats.attrs["executor"]
 
 
-def _gaussian_location_run(draws: int, max_steps: int | None):
+def _gaussian_location_run(draws: int, max_steps: int | None, kernel: str = "imh"):
     """SMC-ABC of GaussianLocation and its exact ABC posterior's mean and sd: with a Gaussian
     kernel on the whitened sufficient statistic it is N(ȳ, se²(1 + ε²)) truncated to the box."""
     sim = GaussianLocation()
@@ -88,17 +90,28 @@ def _gaussian_location_run(draws: int, max_steps: int | None):
     with pm.Model():
         add_simulator("y", sim, observed, epsilon=epsilon, distance=sim.distance)
         idata = sample_smc_abc(
-            draws=draws, executor="serial", random_seed=0, max_steps=max_steps, **QUIET
+            draws=draws,
+            executor="serial",
+            random_seed=0,
+            max_steps=max_steps,
+            kernel=kernel,
+            **QUIET,
         )
     return idata, exact.mean(), exact.std() * np.sqrt(1 + epsilon**2)
 
 
-@pytest.mark.parametrize("max_steps", [None, 2])
-def test_gaussian_location_matches_the_exact_abc_posterior(max_steps):
-    idata, mean, sd = _gaussian_location_run(400, max_steps)
+@pytest.mark.parametrize(("max_steps", "kernel"), [(None, "imh"), (2, "imh"), (None, "mh")])
+def test_gaussian_location_matches_the_exact_abc_posterior(max_steps, kernel):
+    idata, mean, sd = _gaussian_location_run(400, max_steps, kernel)
     draws = idata.posterior["mu"].values.ravel()
     assert abs(draws.mean() - mean) < 0.3 * sd
     assert 0.85 < draws.std() / sd < 1.15
+    assert idata.sample_stats.attrs["kernel"] == kernel
+
+
+def test_an_unknown_kernel_is_refused_before_any_simulation():
+    with pm.Model(), pytest.raises(ValueError, match=r"kernel must be one of \['imh', 'mh'\]"):
+        sample_smc_abc(draws=10, executor="serial", kernel="nuts", **QUIET)
 
 
 def test_a_step_cap_bounds_each_stage():

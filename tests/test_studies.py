@@ -146,7 +146,7 @@ def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys
     assert predictive["posterior_predictive"].attrs["noise"] == 0  # smooth bands
 
 
-def test_estimate_with_smc_cvode_and_the_windowed_distance(tmp_path, capsys, monkeypatch):
+def test_estimate_with_smc_mh_cvode_and_the_windowed_distance(tmp_path, capsys, monkeypatch):
     calls = []
 
     def windowed_spy(sims, obs):
@@ -156,7 +156,7 @@ def test_estimate_with_smc_cvode_and_the_windowed_distance(tmp_path, capsys, mon
     monkeypatch.setitem(BATCH_DISTANCES, "windowed", windowed_spy)
     out = tmp_path / "estimate"
     command = ["estimate", "--budget", "smoke", "--out", str(out), "--json", "--solver", "cvode"]
-    command += ["--executor", "serial", "--distance", "windowed"]
+    command += ["--executor", "serial", "--distance", "windowed", "--kernel", "mh"]
     main([*command, "--method", "smc", "--particles", "4", "--epsilon", "0.05"])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert 2 * 4 <= summary["n_simulations"] < 2 * 4 * 100
@@ -167,6 +167,7 @@ def test_estimate_with_smc_cvode_and_the_windowed_distance(tmp_path, capsys, mon
     tree = xr.open_datatree(out / "predictive_1.nc", engine="h5netcdf")
     assert {"prior", "posterior", "posterior_predictive"} <= set(tree.children)
     assert tree["prior"]["M0"].size == 4
+    assert tree["sample_stats"].attrs["kernel"] == "mh"
     assert (out / "fig5_kde_dataset1.png").exists()
 
 
@@ -207,6 +208,12 @@ def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stag
 def test_estimate_refuses_an_unknown_distance_before_any_work(tmp_path):
     with pytest.raises(ValueError, match=r"distance must be one of .*, got 'l2'"):
         estimation_study(StudySettings(budget="smoke", out=tmp_path / "e"), distance="l2")
+    assert not (tmp_path / "e" / "checkpoints").exists()
+
+
+def test_estimate_refuses_an_unknown_kernel_before_any_work(tmp_path):
+    with pytest.raises(ValueError, match=r"kernel must be one of \['imh', 'mh'\], got 'hmc'"):
+        estimation_study(StudySettings(budget="smoke", out=tmp_path / "e"), kernel="hmc")
     assert not (tmp_path / "e" / "checkpoints").exists()
 
 

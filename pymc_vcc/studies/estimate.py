@@ -33,7 +33,8 @@ from pymc_vcc.inference.distances import BATCH_DISTANCES, BatchDistance, ks_dist
 from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
-from pymc_vcc.inference.pymc.smc import check_max_steps, sample_smc_abc
+from pymc_vcc.inference.pymc.smc import check_kernel, check_max_steps, sample_smc_abc
+from pymc_vcc.inference.samplers import SAMPLERS, SmcKernel
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
@@ -55,10 +56,6 @@ from pymc_vcc.studies.common import (
 
 SENSITIVE = ("M0", "CF_VOL", "CF_POW", "CF_PREF", "CF_LEV")
 """Parameters the paper found well identified (Fig. 5), shown first in the KDE figures."""
-
-METHODS: tuple[str, ...] = ("rejection", "smc", "likelihood")
-"""Samplers of the study: the paper's ABC rejection, SMC-ABC, or tempered SMC on the exact
-likelihood (both PyMC's SMC with the parallel kernel)."""
 
 INTERVAL = 0.95
 """Probability of the central posterior interval checked against the truth."""
@@ -186,11 +183,13 @@ def smc_sequential_calibration(
     likelihood: bool = False,
     distance: BatchDistance = ks_distances,
     max_steps: int | None = None,
+    kernel: SmcKernel = "imh",
 ) -> SequentialResult:
     """Algorithm 1 with tempered SMC: each dataset's posterior, fitted by a Gaussian mixture, is
     the next dataset's prior. SMC-ABC on ``distance`` (default the paper's KS), or with
-    ``likelihood`` the exact likelihood under ``sensor_noise`` (known scales), at most
-    ``max_steps`` mutation steps per stage. Each tree also gets a ``prior`` group of ``draws``
+    ``likelihood`` the exact likelihood under ``sensor_noise`` (known scales), with the mutation
+    ``kernel`` (see :func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`), at most ``max_steps``
+    steps per stage. Each tree also gets a ``prior`` group of ``draws``
     prior draws."""
     trees: list[xr.DataTree] = []
     priors: list[Prior] = []
@@ -216,6 +215,7 @@ def smc_sequential_calibration(
                 random_seed=sampler_seed,
                 checkpoint=settings.checkpoint(f"estimate_smc_{k}"),
                 max_steps=max_steps,
+                kernel=kernel,
                 progressbar=bool(settings.progress),
             )
         draws_of_prior = prior.sample(draws, np.random.default_rng(prior_seed))
@@ -247,6 +247,7 @@ def estimation_study(
     sensor_noise: SensorNoise | None = None,
     distance: str = "ks",
     kernel_steps: int | None = None,
+    kernel: SmcKernel = "imh",
 ) -> EstimationResult:
     """Sequential calibration of all 26 parameters on two simulated datasets (Figs. 5 to 8).
 
@@ -269,12 +270,15 @@ def estimation_study(
             :data:`~pymc_vcc.inference.distances.BATCH_DISTANCES` (``"ks"``: the paper's).
         kernel_steps: ``"smc"`` and ``"likelihood"``: at most this many mutation steps per
             stage (default: until the particles decorrelate, PyMC's rule).
+        kernel: ``"smc"`` and ``"likelihood"``: the mutation kernel, ``"imh"`` (independent
+            proposals, PyMC's default) or ``"mh"`` (random-walk steps).
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
+    if method not in SAMPLERS:
+        raise ValueError(f"method must be one of {list(SAMPLERS)}, got {method!r}")
     if distance not in BATCH_DISTANCES:
         raise ValueError(f"distance must be one of {list(BATCH_DISTANCES)}, got {distance!r}")
     check_max_steps(kernel_steps, "kernel_steps")
+    check_kernel(kernel)
     likelihood = method == "likelihood"
     if likelihood and sensor_noise is None:
         raise ValueError(
@@ -317,6 +321,7 @@ def estimation_study(
                 likelihood=likelihood,
                 distance=BATCH_DISTANCES[distance],
                 max_steps=kernel_steps,
+                kernel=kernel,
             )
         else:
             calibration = sequential_calibration(

@@ -16,7 +16,6 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 import pymc as pm
@@ -29,6 +28,7 @@ from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.reference_table import ReferenceTable, simulate_table, table_rejection
 from pymc_vcc.inference.rejection import abc_rejection
+from pymc_vcc.inference.samplers import SAMPLERS, Sampler
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit
 from pymc_vcc.plots import plot_charge_posteriors, save_figure
@@ -41,8 +41,6 @@ from pymc_vcc.studies.common import (
     write_text,
 )
 
-Sampler = Literal["rejection", "smc", "likelihood"]
-SAMPLERS: tuple[str, ...] = ("rejection", "smc", "likelihood")
 INTERVAL = 0.95  # central posterior interval reported and checked for the truth
 CHARGE = "M0"
 

@@ -2,9 +2,10 @@
 
 ``pm.sample_smc`` evaluates the (pseudo-)likelihood of its particles one after another in a Python
 loop, and its ``cores`` only run whole independent SMC runs side by side. With a simulator that
-costs a second, that loop is the bottleneck. :class:`ParallelIMH` is PyMC's independent
-Metropolis–Hastings SMC kernel with the likelihood evaluated differently: where the stock
-kernel calls a compiled likelihood per particle (running the simulator inside PyTensor), it
+costs a second, that loop is the bottleneck. :class:`ParallelIMH` and :class:`ParallelMH` are
+PyMC's independent and random-walk Metropolis–Hastings SMC kernels with the likelihood
+evaluated differently: where the stock kernel calls a compiled likelihood per particle (running
+the simulator inside PyTensor), each
 
 1. evaluates the parameters of every ``pm.Simulator`` node for all particles (compiled, cheap),
 2. runs all their simulations in one batch through an executor of
@@ -14,9 +15,9 @@ kernel calls a compiled likelihood per particle (running the simulator inside Py
    other observed terms, compiled), with −inf for a failed simulation: zero likelihood, so
    the particle is dropped at resampling or the proposal rejected, never a crash.
 
-Everything else (tempering, resampling, proposals, acceptance) is the stock IMH kernel, drawing
-from the same random generator in the same order: with a simulator that does not use its
-random stream, the same seed gives the same posterior as the stock kernel, bit for bit.
+Everything else (tempering, resampling, proposals, tuning, acceptance) is the stock kernel's,
+drawing from the same random generator in the same order: with a simulator that does not use
+its random stream, the same seed gives the same posterior as the stock kernel, bit for bit.
 
 Simulations run and failed per stage are recorded in ``sample_stats`` (``simulations``,
 ``failed_simulations``, ``resumed_simulations``, ``stage_seconds``) and their totals in its
@@ -62,7 +63,7 @@ from pymc.distributions.simulator import SimulatorRV
 from pymc.model import Model, modelcontext
 from pymc.pytensorf import compile as compile_pytensor
 from pymc.pytensorf import floatX, join_nonshared_inputs, make_shared_replacements
-from pymc.smc.kernels import IMH, Pearson
+from pymc.smc.kernels import IMH, MH, Pearson
 from pytensor.graph.basic import Constant
 from pytensor.graph.traversal import ancestors
 from pytensor.tensor.type_other import NoneTypeT
@@ -79,6 +80,7 @@ from pymc_vcc.execution.outcomes import OK, SimulationOutcome, crash_outcome
 from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore, describe_callable
 from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import DistanceKernel, SimulatorFunction
+from pymc_vcc.inference.samplers import SMC_KERNELS, SmcKernel
 
 logger = logging.getLogger(__name__)
 
@@ -123,7 +125,7 @@ class _BatchLikelihood:
         nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
         if not nodes:
             raise ValueError(
-                "the model has no pm.Simulator node; ParallelIMH batches simulations only "
+                "the model has no pm.Simulator node; the parallel kernels batch simulations only "
                 "(use pm.sample_smc's default kernel for models with ordinary likelihoods)"
             )
         others = [rv for rv in model.observed_RVs if rv not in nodes]
@@ -220,35 +222,41 @@ def check_max_steps(max_steps: int | None, name: str = "max_steps") -> int | Non
     return max_steps
 
 
-class ParallelIMH(IMH):
-    """PyMC's IMH SMC kernel with the simulations of all particles run as one parallel batch.
+_BATCH_STATS: dict[str, tuple[type, list]] = {
+    "simulations": (int, []),
+    "failed_simulations": (int, []),
+    "resumed_simulations": (int, []),
+    "stage_seconds": (float, []),
+    "ess": (float, []),
+}
+"""Per-stage statistics both parallel kernels add to the stock kernel's."""
 
-    Use it as ``pm.sample_smc(kernel=ParallelIMH, executor=ex, chains=1, ...)`` on a model
-    with ``pm.Simulator`` nodes (e.g. from :func:`pymc_vcc.inference.pymc.model.add_simulator`), or
-    through :func:`sample_smc_abc`, which picks defaults suited to expensive simulators.
+
+def check_kernel(kernel: str, name: str = "kernel") -> str:
+    """``kernel`` if it names one of :data:`KERNELS`, else ValueError naming it ``name``."""
+    if kernel not in KERNELS:
+        raise ValueError(f"{name} must be one of {list(KERNELS)}, got {kernel!r}")
+    return kernel
+
+
+class _BatchSimulations:
+    """What :class:`ParallelIMH` and :class:`ParallelMH` share: the simulations of all
+    particles of a mutation step run as one batch through an executor, checkpointed, their
+    failures counted; and the stock kernels' mutation loop around it (a subclass supplies the
+    proposal). Mixed in before a stock PyMC SMC kernel.
 
     Args:
-        executor: where simulations run, an executor of :mod:`pymc_vcc.execution.executors` (the
-            caller
-            opens and closes it); None runs them in this process.
-        checkpoint: an open :class:`~pymc_vcc.execution.store.LikelihoodStore` (the caller opens and
-            closes it, fingerprinting the run: :func:`sample_smc_abc` does): each finished
+        executor: where simulations run, an executor of :mod:`pymc_vcc.execution.executors`
+            (the caller opens and closes it); None runs them in this process.
+        checkpoint: an open :class:`~pymc_vcc.execution.store.LikelihoodStore` (the caller opens
+            and closes it, fingerprinting the run: :func:`sample_smc_abc` does): each finished
             simulation is persisted there, and one already there is not run again.
-        correlation_threshold: as for ``pymc.smc.kernels.IMH``.
-        max_steps: at most this many independent-MH steps per stage (default: PyMC's rule
-            alone, stepping until the particles' correlation with the stage's start stops
-            falling, which in many dimensions with low acceptance takes dozens of steps).
+        correlation_threshold: as for the stock kernel.
+        max_steps: at most this many mutation steps per stage (default: PyMC's rule alone,
+            stepping until the particles' correlation with the stage's start stops falling,
+            which in many dimensions with low acceptance takes dozens of steps).
         **kwargs: the stock kernel's arguments (``draws``, ``model``, ``threshold``, ...).
     """
-
-    stats_dtypes_shapes: ClassVar[dict[str, tuple[type, list]]] = {
-        **IMH.stats_dtypes_shapes,
-        "simulations": (int, []),
-        "failed_simulations": (int, []),
-        "resumed_simulations": (int, []),
-        "stage_seconds": (float, []),
-        "ess": (float, []),
-    }
 
     def __init__(
         self,
@@ -293,8 +301,9 @@ class ParallelIMH(IMH):
     def __getstate__(self) -> dict:
         if self.checkpoint is not None:
             raise ValueError(
-                "a ParallelIMH kernel with a checkpoint cannot run in another process; pass "
-                "cores=1 to pm.sample_smc (or use pymc_vcc.inference.pymc.smc.sample_smc_abc)"
+                f"a {type(self).__name__} kernel with a checkpoint cannot run in another "
+                "process; pass cores=1 to pm.sample_smc (or use "
+                "pymc_vcc.inference.pymc.smc.sample_smc_abc)"
             )
         state = self.__dict__.copy()
         if not isinstance(self.executor, SerialExecutor):
@@ -394,18 +403,26 @@ class ParallelIMH(IMH):
                 f"{self.failure_reasons[:2]}. Check the simulator, the prior bounds and epsilon."
             )
 
+    def _propose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One proposal per particle, with the log densities of proposing it from its particle
+        (forward) and the particle from it (backward); zeros for a symmetric proposal."""
+        raise NotImplementedError
+
+    def _record_acceptance(self, accepted_steps: np.ndarray) -> None:
+        """Keep the stage's acceptance (``accepted_steps``: steps × particles) as the stock
+        kernel does."""
+        raise NotImplementedError
+
     def mutate(self) -> None:
-        """Independent MH moves, each step's proposals simulated as one batch."""
+        """The stock kernel's Metropolis–Hastings moves, each step's proposals simulated as one
+        batch, at most :attr:`max_steps` steps."""
         self.n_steps = 1
         old_correlation = 2
         correlation = Pearson(self.tempered_posterior)
         accepted_steps = []
         while True:
             log_uniform = np.log(self.rng.random(self.draws))
-            proposal = floatX(self.proposal_dist.rvs(size=self.draws, random_state=self.rng))
-            proposal = proposal.reshape(len(proposal), -1)
-            forward_logp = self.proposal_dist.logpdf(proposal)
-            backward_logp = self.proposal_dist.logpdf(self.tempered_posterior)
+            proposal, forward_logp, backward_logp = self._propose()
             prior_logp = np.array([self.prior_logp_func(p) for p in proposal]).reshape(-1)
             loglik = self._simulated_loglik(proposal, prior_logp)
             proposal_logp = prior_logp + loglik * self.beta
@@ -426,7 +443,7 @@ class ParallelIMH(IMH):
                 old_correlation = pearson_r
             else:
                 break
-        self.acc_rate = np.mean(accepted_steps)
+        self._record_acceptance(np.array(accepted_steps))
 
     def sample_stats(self) -> dict[str, int | float]:
         now = time.perf_counter()
@@ -447,12 +464,71 @@ class ParallelIMH(IMH):
     def sample_settings(self) -> dict[str, int | float | str]:
         return {
             **super().sample_settings(),
+            "kernel": _KERNEL_NAMES[type(self)],
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
             "failure_examples": " | ".join(self.failure_reasons),
             "median_log_likelihood": float(np.median(self.likelihood_logp)),
             "max_steps": self.max_steps or 0,  # 0: no cap
             "executor": repr(self.executor),
         }
+
+
+class ParallelIMH(_BatchSimulations, IMH):
+    """PyMC's independent Metropolis–Hastings SMC kernel (proposals from a Gaussian fitted to
+    the particles) with the simulations of all particles run as one parallel batch.
+
+    Use it as ``pm.sample_smc(kernel=ParallelIMH, executor=ex, chains=1, ...)`` on a model
+    with ``pm.Simulator`` nodes (e.g. from :func:`pymc_vcc.inference.pymc.model.add_simulator`), or
+    through :func:`sample_smc_abc`, which picks defaults suited to expensive simulators. Its
+    arguments are those of :class:`_BatchSimulations`.
+    """
+
+    stats_dtypes_shapes: ClassVar[dict[str, tuple[type, list]]] = {
+        **IMH.stats_dtypes_shapes,
+        **_BATCH_STATS,
+    }
+
+    def _propose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        proposal = floatX(self.proposal_dist.rvs(size=self.draws, random_state=self.rng))
+        proposal = proposal.reshape(len(proposal), -1)
+        forward_logp = self.proposal_dist.logpdf(proposal)
+        backward_logp = self.proposal_dist.logpdf(self.tempered_posterior)
+        return proposal, forward_logp, backward_logp
+
+    def _record_acceptance(self, accepted_steps: np.ndarray) -> None:
+        self.acc_rate = np.mean(accepted_steps)
+
+
+class ParallelMH(_BatchSimulations, MH):
+    """PyMC's random-walk Metropolis–Hastings SMC kernel (Gaussian steps with the particles'
+    covariance, each particle's scale tuned towards 23.4 % acceptance) with the simulations
+    of all particles run as one parallel batch; arguments as :class:`ParallelIMH`'s.
+
+    Where the posterior is far from Gaussian (curved, or correlated across many dimensions),
+    independent proposals drawn from the particles' Gaussian are rarely accepted; local steps
+    still are.
+    """
+
+    stats_dtypes_shapes: ClassVar[dict[str, tuple[type, list]]] = {
+        **MH.stats_dtypes_shapes,
+        **_BATCH_STATS,
+    }
+
+    def _propose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        steps = self.proposal_dist(num_draws=self.draws, rng=self.rng)
+        proposal = floatX(self.tempered_posterior + steps * self.proposal_scales[:, None])
+        return proposal, np.zeros(self.draws), np.zeros(self.draws)
+
+    def _record_acceptance(self, accepted_steps: np.ndarray) -> None:
+        self.chain_acc_rate = np.mean(accepted_steps, axis=0)
+
+
+KERNELS: dict[str, type[_BatchSimulations]] = dict(
+    zip(SMC_KERNELS, (ParallelIMH, ParallelMH), strict=True)
+)
+"""The parallel kernel of each name in :data:`~pymc_vcc.inference.samplers.SMC_KERNELS`."""
+
+_KERNEL_NAMES = {kernel: name for name, kernel in KERNELS.items()}
 
 
 def _graph_digest(variables: Sequence) -> str:
@@ -481,13 +557,17 @@ def _run_settings(
     threshold: float,
     correlation: float,
     max_steps: int | None,
+    kernel: str,
 ) -> dict[str, Any]:
     """What a resumed run must share with the checkpointed one (besides the seed)."""
     nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
-    # a step cap is named only when set, so runs checkpointed before it existed still resume
+    # a step cap and a kernel other than IMH are named only when set, so runs checkpointed
+    # before they existed still resume
     capped = {} if max_steps is None else {"max_steps": int(max_steps)}
+    other_kernel = {} if kernel == "imh" else {"kernel": kernel}
     return {
         **capped,
+        **other_kernel,
         "sampler": "smc_abc",
         "draws": int(draws),
         "chains": int(chains),
@@ -516,10 +596,12 @@ def sample_smc_abc(
     threshold: float = 0.5,
     correlation_threshold: float = 0.01,
     max_steps: int | None = None,
+    kernel: SmcKernel = "imh",
     progressbar: bool = True,
     **kwargs: Any,
 ) -> DataTree:
-    """SMC-ABC of the current model with :class:`ParallelIMH` and defaults for costly simulators.
+    """SMC-ABC of the current model with :class:`ParallelIMH` (or :class:`ParallelMH`) and
+    defaults for costly simulators.
 
     Args:
         draws: particles per stage (and posterior draws per chain). A run costs about
@@ -540,6 +622,8 @@ def sample_smc_abc(
         model: the PyMC model (default: the current context).
         threshold, correlation_threshold: as for ``pm.sample_smc``'s IMH kernel.
         max_steps: at most this many mutation steps per stage (see :class:`ParallelIMH`).
+        kernel: the mutation kernel, a name of :data:`KERNELS`: ``"imh"`` (independent
+            proposals, PyMC's default) or ``"mh"`` (random-walk steps).
         progressbar: show PyMC's progress bar.
         **kwargs: other ``pm.sample_smc`` arguments (``start``, ``idata_kwargs``, ...).
 
@@ -558,6 +642,7 @@ def sample_smc_abc(
     if int(draws) != draws or draws < 2:
         raise ValueError(f"draws must be an integer >= 2, got {draws}")
     check_max_steps(max_steps)
+    check_kernel(kernel)
     kwargs.setdefault("compute_convergence_checks", chains > 1)
     model = modelcontext(model)
     store = None
@@ -571,7 +656,9 @@ def sample_smc_abc(
                 f"random_seed must be a non-negative integer or None with a checkpoint, got "
                 f"{random_seed!r}"
             )
-        settings = _run_settings(model, draws, chains, threshold, correlation_threshold, max_steps)
+        settings = _run_settings(
+            model, draws, chains, threshold, correlation_threshold, max_steps, kernel
+        )
         store = LikelihoodStore(checkpoint, settings, random_seed)
         random_seed = store.entropy
     n_parameters = sum(model.initial_point()[v.name].size for v in model.value_vars)
@@ -589,7 +676,7 @@ def sample_smc_abc(
             warnings.filterwarnings("ignore", "Numba will use object mode", UserWarning)
             tree = pm.sample_smc(
                 draws=int(draws),
-                kernel=ParallelIMH,
+                kernel=KERNELS[kernel],
                 chains=int(chains),
                 cores=1,
                 random_seed=random_seed,
@@ -659,4 +746,4 @@ def _with_run_summary(tree: DataTree, model: Model) -> DataTree:
     return tree
 
 
-__all__ = ["ParallelIMH", "sample_smc_abc"]
+__all__ = ["KERNELS", "ParallelIMH", "ParallelMH", "sample_smc_abc"]
