@@ -1,9 +1,10 @@
 """Cycle models: one module per topology, all integrated by the same driver.
 
 :mod:`.base` holds the contract (:class:`~.base.CycleModel`, :class:`~.base.StateLayout`);
-:mod:`.split_unit` the split unit's components as records; :mod:`.split_cooling` and
-:mod:`.heat_pump_heating` the two modes of that unit. A unit description names its cycle in
-``[unit] cycle``.
+:mod:`.split_unit` the split unit's components as records, :mod:`.split_balances` its
+balances, Jacobian and outputs in either mode; :mod:`.split_cooling` and
+:mod:`.heat_pump_heating` the two modes' layouts, charges and start-up states. A unit
+description names its cycle in ``[unit] cycle``.
 """
 
 from __future__ import annotations

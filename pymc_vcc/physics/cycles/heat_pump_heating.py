@@ -7,67 +7,33 @@ Two pressure zones (N = cells per heat exchanger):
   coil), then the liquid line; outflow: expansion valve;
 * low side: the evaporator's N cells (outdoor coil) and the suction tank; outflow: compressor.
 
-Pressure drops: vapour line and condenser between the compressor discharge and the high-side
-zone (PD = PC + Δp), evaporator between the low-side zone and the suction (PS = PE - Δp),
-liquid line in series with the valve; the compressor flow solves for the pressures its own
-flow causes (:func:`~.split_unit.flow_through_drops`). The charge controller, compressor,
-valve, tank (with its bleed), coils (cell-mean wall heat) and fans are those of
-:mod:`.split_cooling`, with the indoor fan over the condenser and the outdoor fan over the
-evaporator; the compressor shell loses heat to the outdoor air. The indoor coil condenses, so
-there is no latent load: the indoor relative humidity is read but changes nothing
-(``Q_latent`` = 0, ``SHR`` = 1).
+The balances, Jacobian and outputs are the split unit's (:mod:`.split_balances`), with the indoor
+fan over the condenser and the outdoor fan over the evaporator; the compressor shell loses heat
+to the outdoor air. The indoor coil condenses, so there is no latent load: the indoor relative
+humidity is read but changes nothing (``Q_latent`` = 0, ``SHR`` = 1). This module gives the
+heating mode's state layout, charge and start-up state.
 """
 
 from __future__ import annotations
 
 import functools
-import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
-from pymc_vcc.physics.components.compressor import compressor, protection_speed_factor
-from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
-from pymc_vcc.physics.components.fan import air_inlet_temperature
-from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
-from pymc_vcc.physics.components.heat_transfer import air_side_heat
-from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
 from pymc_vcc.physics.cycles.base import (
     N_PROPERTIES,
     Block,
     BlockKind,
-    CycleModel,
     StateLayout,
     cell_properties,
-    perturb,
     place_charge,
     quality_enthalpy,
-    restore,
     stored_mass,
 )
-from pymc_vcc.physics.cycles.split_unit import (
-    DIAGNOSTIC_INFO,
-    DP_REG,
-    FLOW_EPS,
-    OPTIONAL_OUTPUT_IDS,
-    OUTPUT_INFO,
-    PARAMETERS,
-    SRC_EPS,
-    coil_cell_heat,
-    coil_friction_density,
-    filled_coils,
-    flow_through_drops,
-    lumped_drops,
-    split_unit_constants,
-    suction_outlet,
-)
-from pymc_vcc.physics.refrigerant import p_sat_from_T, saturation_point, state, state_at
-
-if TYPE_CHECKING:
-    from pymc_vcc.physics.unit import Unit
-
-N_EVAL = len(OUTPUT_INFO) + len(DIAGNOSTIC_INFO)
+from pymc_vcc.physics.cycles.split_balances import SplitUnitCycle, cell_volumes
+from pymc_vcc.physics.cycles.split_unit import filled_coils
+from pymc_vcc.physics.refrigerant import p_sat_from_T
 
 
 @functools.cache
@@ -91,247 +57,6 @@ def layout(n_volumes: int) -> StateLayout:
 
 
 @njit(cache=True, error_model="numpy")
-def cell_volumes(c):
-    """Volume of every cell (numbered zone after zone), m³."""
-    n = c.layout.h_liquid_line - c.layout.h_cond
-    volumes = np.empty(2 * n + 3)
-    volumes[0] = c.vapor_line.volume
-    volumes[1 : n + 1] = c.condenser.cell_volume
-    volumes[n + 1] = c.liquid_line.volume
-    volumes[n + 2 : 2 * n + 2] = c.evaporator.cell_volume
-    volumes[2 * n + 2] = c.tank.volume
-    return volumes
-
-
-@njit(cache=True, error_model="numpy")
-def evaluate(y, u, constants, tables, dydt, out):
-    """Right-hand side and outputs at state ``y`` under inputs ``u`` = (valve opening,
-    compressor speed Hz, T_ambient K, T_indoor K, indoor relative humidity, unused: the indoor
-    coil condenses); see :class:`~.base.CycleModel`."""
-    c = constants[0]
-    props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
-    cell_properties(y, c.layout.zones, tables, props)
-    return balances(y, u, c, tables, props, dydt, out)
-
-
-@njit(cache=True, error_model="numpy")
-def balances(y, u, c, tables, props, dydt, out, rates=True):
-    """:func:`evaluate` given the cell properties ``props`` of every cell; with ``rates``
-    False the outputs alone (walls and zones skipped: ``dydt`` untouched, the heats NaN)."""
-    at = c.layout
-    n = at.h_liquid_line - at.h_cond
-    opening, speed, T_amb, T_ind = u[0], u[1], u[2], u[3]
-    p_c = y[at.p_cond]
-    p_e = y[at.p_evap]
-    z = y[at.z]
-    cond, evap, comp = c.condenser, c.evaporator, c.compressor
-
-    # ---- cells: vapour line + condenser + liquid line, evaporator + tank
-    nc = n + 2
-    ne = n + 1
-    h_zc = y[at.h_vapor_line : at.h_vapor_line + nc]
-    h_ze = y[at.h_evap : at.h_evap + ne]
-    volumes = cell_volumes(c)
-    vol_c = volumes[:nc]
-    vol_e = volumes[nc:]
-    T_c = props[0, :nc]
-    rho_c = props[1, :nc]
-    x_c = props[4, :nc]
-    T_e = props[0, nc:]
-    rho_e = props[1, nc:]
-    x_e = props[4, nc:]
-    mass = stored_mass(volumes, props[1])
-    if not math.isfinite(mass):
-        out[:] = np.nan
-        dydt[:] = np.nan
-        return False
-    # homogeneous friction along a coil goes with its mean specific volume
-    rho_friction_c = coil_friction_density(rho_c[1 : n + 1], n)
-    rho_friction_e = coil_friction_density(rho_e, n)
-
-    # ---- suction tank (bleed), pressure drops at the compressor's own flow, compressor
-    h_suc, level = suction_outlet(tables, p_e, h_ze[n], rho_e[n], c)
-    outlet = state(tables, p_e, h_suc)
-    rho_out = outlet[1]
-    speed = speed * protection_speed_factor(p_c, comp.p_protection_start, comp.p_protection_stop)
-    flow = flow_through_drops(
-        p_c, p_e, rho_out, outlet[2], rho_c[0], rho_friction_c, rho_friction_e, speed, c, True
-    )
-    p_s, p_d, dp_cond, dp_evap, dp_vap = lumped_drops(
-        flow, p_c, p_e, rho_c[0], rho_friction_c, rho_friction_e, c, True
-    )
-    T_s, rho_s = state(tables, p_s, h_suc)[:2]
-    m_comp, h_d, w_comp, w_ref, w_is, q_comp_amb = compressor(
-        tables, p_s, h_suc, rho_s, p_d, speed, T_amb, comp
-    )
-    T_d = state(tables, p_d, h_d)[0]
-    if not (math.isfinite(T_d) and math.isfinite(T_s)):
-        out[:] = np.nan
-        dydt[:] = np.nan
-        return False
-
-    # ---- valve and charge controller
-    m_valve = valve_mass_flow(
-        opening,
-        c.valve.flow_area,
-        c.valve.cf_lev,
-        rho_c[nc - 1],
-        p_c - p_e,
-        c.liquid_line.friction,
-        DP_REG,
-    )
-    error = c.controller.m0 - mass
-    m_src = c.controller.kp * error + c.controller.ki * z
-
-    q_cond = q_evap = np.nan
-    if rates:
-        # ---- walls and air: indoor air over the condenser, outdoor air over the evaporator
-        T_air_c = air_inlet_temperature(T_ind, cond.fan_power, n * cond.air_capacity)
-        T_air_e = air_inlet_temperature(T_amb, evap.fan_power, n * evap.air_capacity)
-        src_c = np.zeros(nc)
-        src_e = np.zeros(ne)
-        q_cond = 0.0
-        q_evap = 0.0
-        flow_c = abs(m_comp) / cond.nominal_mass_flow
-        flow_e = abs(m_valve) / evap.nominal_mass_flow
-        point_c = saturation_point(tables, p_c)
-        point_e = saturation_point(tables, p_e)
-        # quality entering the evaporator
-        x_in_e = (h_zc[nc - 1] - point_e.h_l) / (point_e.h_v - point_e.h_l)
-        T_in_e = state_at(tables, point_e, p_e, h_zc[nc - 1])[0]
-        for i in range(n):
-            k = i + 1  # condenser cell i is cell k of the high-side zone (inlet: cell k - 1)
-            tw = y[at.Tw_cond + i]
-            q_ref = coil_cell_heat(
-                tables,
-                point_c,
-                p_c,
-                cond,
-                tw,
-                flow_c,
-                h_zc[k - 1],
-                x_c[k - 1],
-                T_c[k - 1],
-                h_zc[k],
-                x_c[k],
-                T_c[k],
-            )
-            q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
-            dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
-            src_c[k] = q_ref
-            q_cond -= q_ref
-            tw = y[at.Tw_evap + i]
-            h_in, x_in, T_in = (
-                (h_zc[nc - 1], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
-            )
-            q_ref = coil_cell_heat(
-                tables, point_e, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
-            )
-            q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
-            dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
-            src_e[i] = q_ref
-            q_evap += q_ref
-
-        # ---- refrigerant zones
-        src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
-        src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[nc - 1] - h_ze[0])
-        src_e[ne - 1] -= m_comp * (h_suc - h_ze[ne - 1])
-        dydt[at.p_cond] = zone_derivatives(
-            vol_c,
-            rho_c,
-            props[2, :nc],
-            props[3, :nc],
-            h_zc,
-            src_c,
-            m_comp + m_src,
-            m_valve,
-            FLOW_EPS,
-            dydt[at.h_vapor_line : at.h_vapor_line + nc],
-        )
-        dydt[at.p_evap] = zone_derivatives(
-            vol_e,
-            rho_e,
-            props[2, nc:],
-            props[3, nc:],
-            h_ze,
-            src_e,
-            m_valve,
-            m_comp,
-            FLOW_EPS,
-            dydt[at.h_evap : at.h_evap + ne],
-        )
-        dydt[at.z] = error
-
-    # ---- outputs and diagnostics, in the order of OUTPUT_INFO and DIAGNOSTIC_INFO
-    out[0] = T_d
-    out[1] = p_d
-    out[2] = T_s
-    out[3] = p_s
-    out[4] = T_c[n]  # last condenser cell
-    out[5] = p_c
-    out[6] = T_e[n - 1]
-    out[7] = p_e
-    out[8] = m_comp
-    out[9] = q_cond
-    out[10] = q_evap
-    out[11] = w_comp
-    out[12] = w_ref
-    out[13] = cond.fan_power + evap.fan_power
-    out[14] = mass
-    out[15] = m_src
-    out[16] = m_valve
-    out[17] = w_is
-    out[18] = q_comp_amb
-    out[19] = evap.air_flow  # outdoor fan over the evaporator
-    out[20] = cond.air_flow
-    out[21] = level
-    out[22] = dp_cond
-    out[23] = dp_evap
-    out[24] = dp_vap
-    out[25] = 0.0  # the indoor coil condenses: no latent load
-    out[26] = 1.0
-    return not rates or bool(np.isfinite(dydt).all())
-
-
-@njit(cache=True, error_model="numpy")
-def jacobian(y, u, constants, tables, f0):
-    """Dense forward-difference Jacobian ∂f/∂y at ``y`` (``f0`` = f(y)); each column
-    re-evaluates only the cell properties its variable touches."""
-    c = constants[0]
-    zones = c.layout.zones
-    jac = np.empty((y.size, y.size))
-    props = np.empty((N_PROPERTIES, zones[:, 1].sum()))
-    cell_properties(y, zones, tables, props)
-    saved = props.copy()
-    work = y.copy()
-    dydt = np.empty(y.size)
-    out = np.empty(N_EVAL)
-    for j in range(y.size):
-        step = perturb(y, work, j, zones, tables, props)
-        balances(work, u, c, tables, props, dydt, out)
-        for i in range(y.size):
-            jac[i, j] = (dydt[i] - f0[i]) / step
-        restore(y, work, j, zones, props, saved)
-    return jac
-
-
-@njit(cache=True, error_model="numpy")
-def outputs_along(ys, us, constants, tables, rates):
-    """Outputs and diagnostics at each row of states ``ys`` with the matching inputs ``us``;
-    with ``rates`` False the heats are NaN (see :func:`balances`), at half the cost."""
-    c = constants[0]
-    props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
-    result = np.empty((ys.shape[0], N_EVAL))
-    dydt = np.empty(ys.shape[1])
-    out = np.empty(N_EVAL)
-    for k in range(ys.shape[0]):
-        cell_properties(ys[k], c.layout.zones, tables, props)
-        balances(ys[k], us[k], c, tables, props, dydt, out, rates)
-        result[k] = out
-    return result
-
-
-@njit(cache=True, error_model="numpy")
 def total_mass(y, constants, tables):
     """Total refrigerant mass M(y), kg (NaN if a property left the tables)."""
     c = constants[0]
@@ -350,29 +75,17 @@ def filled_state(s, p_c, p_e, constants, tables):
     return y
 
 
-class HeatPumpHeating(CycleModel):
+class HeatPumpHeating(SplitUnitCycle):
     """The split unit as a heat pump in heating mode (indoor coil condenses)."""
 
     name = "heat-pump-heating"
     description = "split heat pump, heating: indoor coil condenses, outdoor coil evaporates"
-    parameters = PARAMETERS
-    output_info = OUTPUT_INFO
-    diagnostic_info = DIAGNOSTIC_INFO
-    optional_output_ids = OPTIONAL_OUTPUT_IDS
+    condenser_fan = "indoor"
     capacity = "Q_cond"
-    evaluate = staticmethod(evaluate)
-    jacobian = staticmethod(jacobian)
-    outputs_along = staticmethod(outputs_along)
     total_mass = staticmethod(total_mass)
 
     def layout(self, n_volumes: int) -> StateLayout:
         return layout(n_volumes)
-
-    def constants(
-        self, unit: Unit, theta: np.ndarray, controller: bool | None = None
-    ) -> np.ndarray:
-        n = unit.discretisation.n_volumes
-        return split_unit_constants(unit, theta, layout(n), controller, condenser_fan="indoor")
 
     def initial_state(
         self, c: np.ndarray, n_volumes: int, inputs: np.ndarray, tables

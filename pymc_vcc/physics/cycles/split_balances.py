@@ -1,0 +1,374 @@
+"""The split unit's right-hand side, Jacobian and outputs in either of its modes, and the base
+class of its modes' cycle models.
+
+Both modes have two pressure zones (N = cells per coil):
+
+* high side: the condenser's N cells, then the liquid line (one adiabatic cell); outflow: the
+  expansion valve;
+* low side: the evaporator's N cells, then the suction tank; outflow: the compressor.
+
+The reversing valve decides where the vapour line sits. Cooling: it carries the suction gas
+from the indoor coil (the evaporator), after the evaporator's cells on the low side, and the
+outdoor coil condenses. Heating: it carries the hot gas to the indoor coil (the condenser),
+before the condenser's cells on the high side, and the outdoor coil evaporates. The cycle's
+state layout says which (:func:`hot_gas_line`); everything else reads the layout.
+
+The virtual PI charge controller (paper, section II-B) adds ṁ_src = Kp (M0 - M) + Ki z at the
+compressor discharge, at the discharge enthalpy (leaving at the first high-side cell's own
+enthalpy when negative), with ż = M0 - M. Lumped pressure drops: the condenser's (and the hot
+gas line's) between the discharge and the high-side zone (PD = PC + Δp), the evaporator's (and
+the suction line's) between the low-side zone and the suction (PS = PE - Δp), the liquid
+line's in series with the valve; the compressor flow solves for the pressures its own flow
+causes (:func:`~.split_unit.flow_through_drops`). The indoor coil condenses water where it
+evaporates below the dew point; where it condenses there is no latent load (``Q_latent`` = 0,
+``SHR`` = 1).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, ClassVar, Literal
+
+import numpy as np
+from numba import njit
+
+from pymc_vcc.physics.components.compressor import compressor, protection_speed_factor
+from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
+from pymc_vcc.physics.components.fan import air_inlet_temperature
+from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
+from pymc_vcc.physics.components.heat_transfer import air_side_heat
+from pymc_vcc.physics.components.moist_air import humidity_ratio, latent_heat
+from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
+from pymc_vcc.physics.cycles.base import (
+    N_PROPERTIES,
+    CycleModel,
+    cell_properties,
+    perturb,
+    restore,
+    stored_mass,
+)
+from pymc_vcc.physics.cycles.split_unit import (
+    DIAGNOSTIC_INFO,
+    DP_REG,
+    FLOW_EPS,
+    OPTIONAL_OUTPUT_IDS,
+    OUTPUT_INFO,
+    PARAMETERS,
+    SRC_EPS,
+    coil_cell_heat,
+    coil_friction_density,
+    flow_through_drops,
+    lumped_drops,
+    split_unit_constants,
+    suction_outlet,
+)
+from pymc_vcc.physics.refrigerant import saturation_point, state, state_at
+
+if TYPE_CHECKING:
+    from pymc_vcc.physics.unit import Unit
+
+N_EVAL = len(OUTPUT_INFO) + len(DIAGNOSTIC_INFO)
+
+
+@njit(cache=True, error_model="numpy")
+def hot_gas_line(at):
+    """Whether the vapour line carries the hot gas (heating): the layout ``at`` then holds it in
+    the high-side zone, before the condenser's cells."""
+    return at.h_vapor_line < at.h_cond
+
+
+@njit(cache=True, error_model="numpy")
+def cell_volumes(c):
+    """Volume of every cell (numbered zone after zone, in flow order), m³."""
+    at = c.layout
+    n = at.h_liquid_line - at.h_cond
+    first = 1 if hot_gas_line(at) else 0  # the condenser's first cell in the high-side zone
+    volumes = np.empty(2 * n + 3)
+    if first:
+        volumes[0] = c.vapor_line.volume
+    volumes[first : first + n] = c.condenser.cell_volume
+    volumes[first + n] = c.liquid_line.volume
+    volumes[first + n + 1 : first + 2 * n + 1] = c.evaporator.cell_volume
+    if not first:
+        volumes[2 * n + 1] = c.vapor_line.volume
+    volumes[2 * n + 2] = c.tank.volume
+    return volumes
+
+
+@njit(cache=True, error_model="numpy")
+def evaluate(y, u, constants, tables, dydt, out):
+    """Right-hand side and outputs at state ``y`` under inputs ``u`` = (valve opening,
+    compressor speed Hz, T_ambient K, T_indoor K, indoor relative humidity); see
+    :class:`~.base.CycleModel`. With RH > 0 an evaporating indoor coil condenses water where its
+    wall is below the dew point: that latent heat adds to the wall's load."""
+    c = constants[0]
+    props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
+    cell_properties(y, c.layout.zones, tables, props)
+    return balances(y, u, c, tables, props, dydt, out)
+
+
+@njit(cache=True, error_model="numpy")
+def balances(y, u, c, tables, props, dydt, out, rates=True):
+    """:func:`evaluate` given the cell properties ``props`` of every cell; with ``rates``
+    False the outputs alone (walls and zones skipped: ``dydt`` untouched, the heats NaN)."""
+    at = c.layout
+    n = at.h_liquid_line - at.h_cond
+    heating = hot_gas_line(at)
+    first = 1 if heating else 0  # the condenser's first cell in the high-side zone
+    opening, speed, T_amb, T_ind, rh_ind = u[0], u[1], u[2], u[3], u[4]
+    p_c = y[at.p_cond]
+    p_e = y[at.p_evap]
+    z = y[at.z]
+    cond, evap, comp = c.condenser, c.evaporator, c.compressor
+    outdoor, indoor = (evap, cond) if heating else (cond, evap)
+
+    # ---- cells of both zones, each in flow order after its pressure
+    nc = at.zones[0, 1]  # high-side cells
+    ne = at.zones[1, 1]
+    h_zc = y[at.p_cond + 1 : at.p_cond + 1 + nc]
+    h_ze = y[at.p_evap + 1 : at.p_evap + 1 + ne]
+    volumes = cell_volumes(c)
+    T_c = props[0, :nc]
+    rho_c = props[1, :nc]
+    x_c = props[4, :nc]
+    T_e = props[0, nc:]
+    rho_e = props[1, nc:]
+    x_e = props[4, nc:]
+    mass = stored_mass(volumes, props[1])
+    if not math.isfinite(mass):
+        out[:] = np.nan
+        dydt[:] = np.nan
+        return False
+    # homogeneous friction along a coil goes with its mean specific volume
+    rho_friction_c = coil_friction_density(rho_c[first : first + n], n)
+    rho_friction_e = coil_friction_density(rho_e, n)
+
+    # ---- suction tank (bleed), pressure drops at the compressor's own flow, compressor
+    h_suc, level = suction_outlet(tables, p_e, h_ze[ne - 1], rho_e[ne - 1], c)
+    outlet = state(tables, p_e, h_suc)
+    rho_out = outlet[1]
+    rho_vapor_line = rho_c[0] if heating else rho_out
+    speed = speed * protection_speed_factor(p_c, comp.p_protection_start, comp.p_protection_stop)
+    flow = flow_through_drops(
+        p_c,
+        p_e,
+        rho_out,
+        outlet[2],
+        rho_vapor_line,
+        rho_friction_c,
+        rho_friction_e,
+        speed,
+        c,
+        heating,
+    )
+    p_s, p_d, dp_cond, dp_evap, dp_vap = lumped_drops(
+        flow, p_c, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, heating
+    )
+    T_s, rho_s = state(tables, p_s, h_suc)[:2]
+    m_comp, h_d, w_comp, w_ref, w_is, q_comp_amb = compressor(
+        tables, p_s, h_suc, rho_s, p_d, speed, T_amb, comp
+    )
+    T_d = state(tables, p_d, h_d)[0]
+    if not (math.isfinite(T_d) and math.isfinite(T_s)):
+        out[:] = np.nan
+        dydt[:] = np.nan
+        return False
+
+    # ---- valve and charge controller
+    m_valve = valve_mass_flow(
+        opening,
+        c.valve.flow_area,
+        c.valve.cf_lev,
+        rho_c[nc - 1],
+        p_c - p_e,
+        c.liquid_line.friction,
+        DP_REG,
+    )
+    error = c.controller.m0 - mass
+    m_src = c.controller.kp * error + c.controller.ki * z
+
+    q_cond = q_evap = q_latent = q_sensible = np.nan
+    if rates:
+        # ---- walls and air: each coil under its own fan's air
+        T_air_c = air_inlet_temperature(
+            T_ind if heating else T_amb, cond.fan_power, n * cond.air_capacity
+        )
+        T_air_e = air_inlet_temperature(
+            T_amb if heating else T_ind, evap.fan_power, n * evap.air_capacity
+        )
+        src_c = np.zeros(nc)
+        src_e = np.zeros(ne)
+        q_cond = 0.0
+        q_evap = 0.0
+        q_sensible = 0.0
+        q_latent = 0.0
+        W_ind = humidity_ratio(T_ind, rh_ind)
+        flow_c = abs(m_comp) / cond.nominal_mass_flow
+        flow_e = abs(m_valve) / evap.nominal_mass_flow
+        point_c = saturation_point(tables, p_c)
+        point_e = saturation_point(tables, p_e)
+        # what enters each coil: the discharge gas (or the hot gas line), the liquid line
+        h_in_c, x_in_c, T_in_c = h_d, 0.0, 0.0
+        if not heating:
+            x_in_c = (h_d - point_c.h_l) / (point_c.h_v - point_c.h_l)
+            T_in_c = state_at(tables, point_c, p_c, h_d)[0]
+        x_in_e = (h_zc[nc - 1] - point_e.h_l) / (point_e.h_v - point_e.h_l)
+        T_in_e = state_at(tables, point_e, p_e, h_zc[nc - 1])[0]
+        for i in range(n):
+            k = first + i  # condenser cell i in the high-side zone
+            tw = y[at.Tw_cond + i]
+            h_in, x_in, T_in = (
+                (h_in_c, x_in_c, T_in_c) if k == 0 else (h_zc[k - 1], x_c[k - 1], T_c[k - 1])
+            )
+            q_ref = coil_cell_heat(
+                tables, point_c, p_c, cond, tw, flow_c, h_in, x_in, T_in, h_zc[k], x_c[k], T_c[k]
+            )
+            q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
+            dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
+            src_c[k] = q_ref
+            q_cond -= q_ref
+            tw = y[at.Tw_evap + i]
+            h_in, x_in, T_in = (
+                (h_zc[nc - 1], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
+            )
+            q_ref = coil_cell_heat(
+                tables, point_e, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
+            )
+            q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
+            if not heating:  # the indoor coil evaporates: sensible and latent load
+                q_sensible += q_air
+                if rh_ind > 0.0:
+                    q_wet = latent_heat(
+                        evap.air_capacity,
+                        c.air_specific_heat,
+                        W_ind,
+                        tw,
+                        evap.htc_air,
+                        evap.air_area,
+                    )
+                    q_latent += q_wet
+                    q_air += q_wet
+            dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
+            src_e[i] = q_ref
+            q_evap += q_ref
+
+        # ---- refrigerant zones
+        src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
+        src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[nc - 1] - h_ze[0])
+        src_e[ne - 1] -= m_comp * (h_suc - h_ze[ne - 1])
+        dydt[at.p_cond] = zone_derivatives(
+            volumes[:nc],
+            rho_c,
+            props[2, :nc],
+            props[3, :nc],
+            h_zc,
+            src_c,
+            m_comp + m_src,
+            m_valve,
+            FLOW_EPS,
+            dydt[at.p_cond + 1 : at.p_cond + 1 + nc],
+        )
+        dydt[at.p_evap] = zone_derivatives(
+            volumes[nc:],
+            rho_e,
+            props[2, nc:],
+            props[3, nc:],
+            h_ze,
+            src_e,
+            m_valve,
+            m_comp,
+            FLOW_EPS,
+            dydt[at.p_evap + 1 : at.p_evap + 1 + ne],
+        )
+        dydt[at.z] = error
+
+    # ---- outputs and diagnostics, in the order of OUTPUT_INFO and DIAGNOSTIC_INFO
+    out[0] = T_d
+    out[1] = p_d
+    out[2] = T_s
+    out[3] = p_s
+    out[4] = T_c[first + n - 1]  # the condenser's last cell
+    out[5] = p_c
+    out[6] = T_e[n - 1]
+    out[7] = p_e
+    out[8] = m_comp
+    out[9] = q_cond
+    out[10] = q_evap
+    out[11] = w_comp
+    out[12] = w_ref
+    out[13] = cond.fan_power + evap.fan_power
+    out[14] = mass
+    out[15] = m_src
+    out[16] = m_valve
+    out[17] = w_is
+    out[18] = q_comp_amb
+    out[19] = outdoor.air_flow
+    out[20] = indoor.air_flow
+    out[21] = level
+    out[22] = dp_cond
+    out[23] = dp_evap
+    out[24] = dp_vap
+    out[25] = 0.0 if heating else q_latent  # the indoor coil condenses: no latent load
+    out[26] = 1.0 if heating else q_sensible / (q_sensible + q_latent)
+    return not rates or bool(np.isfinite(dydt).all())
+
+
+@njit(cache=True, error_model="numpy")
+def jacobian(y, u, constants, tables, f0):
+    """Dense forward-difference Jacobian ∂f/∂y at ``y`` (``f0`` = f(y)); each column
+    re-evaluates only the cell properties its variable touches."""
+    c = constants[0]
+    zones = c.layout.zones
+    jac = np.empty((y.size, y.size))
+    props = np.empty((N_PROPERTIES, zones[:, 1].sum()))
+    cell_properties(y, zones, tables, props)
+    saved = props.copy()
+    work = y.copy()
+    dydt = np.empty(y.size)
+    out = np.empty(N_EVAL)
+    for j in range(y.size):
+        step = perturb(y, work, j, zones, tables, props)
+        balances(work, u, c, tables, props, dydt, out)
+        for i in range(y.size):
+            jac[i, j] = (dydt[i] - f0[i]) / step
+        restore(y, work, j, zones, props, saved)
+    return jac
+
+
+@njit(cache=True, error_model="numpy")
+def outputs_along(ys, us, constants, tables, rates):
+    """Outputs and diagnostics at each row of states ``ys`` with the matching inputs ``us``;
+    with ``rates`` False the heats are NaN (see :func:`balances`), at half the cost."""
+    c = constants[0]
+    props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
+    result = np.empty((ys.shape[0], N_EVAL))
+    dydt = np.empty(ys.shape[1])
+    out = np.empty(N_EVAL)
+    for k in range(ys.shape[0]):
+        cell_properties(ys[k], c.layout.zones, tables, props)
+        balances(ys[k], us[k], c, tables, props, dydt, out, rates)
+        result[k] = out
+    return result
+
+
+class SplitUnitCycle(CycleModel):
+    """A mode of the split unit: Table III parameters, the nine outputs and this module's
+    kernels. A subclass gives the mode's state layout (where the vapour line sits), its charge
+    and start-up state, and which fan (``condenser_fan``) blows over the condensing coil."""
+
+    parameters = PARAMETERS
+    output_info = OUTPUT_INFO
+    diagnostic_info = DIAGNOSTIC_INFO
+    optional_output_ids = OPTIONAL_OUTPUT_IDS
+    evaluate = staticmethod(evaluate)
+    jacobian = staticmethod(jacobian)
+    outputs_along = staticmethod(outputs_along)
+    condenser_fan: ClassVar[Literal["outdoor", "indoor"]]
+
+    def constants(
+        self, unit: Unit, theta: np.ndarray, controller: bool | None = None
+    ) -> np.ndarray:
+        layout = self.layout(unit.discretisation.n_volumes)
+        return split_unit_constants(
+            unit, theta, layout, controller, condenser_fan=self.condenser_fan
+        )
