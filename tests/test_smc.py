@@ -125,7 +125,8 @@ def test_a_step_cap_bounds_each_stage():
     assert capped.sample_stats.attrs["max_steps"] == 2
 
 
-def test_linear_gaussian_matches_the_exact_abc_posterior():
+@pytest.mark.parametrize("kernel", ["imh", "mh"])
+def test_linear_gaussian_matches_the_exact_abc_posterior(kernel):
     sim = LinearGaussian()
     observed = sim({"a": 0.2, "b": 0.1}, np.random.default_rng(2))  # far inside the box
     epsilon = 0.5
@@ -133,7 +134,7 @@ def test_linear_gaussian_matches_the_exact_abc_posterior():
     sd = np.sqrt(np.diag(covariance) * (1 + epsilon**2))
     with pm.Model():
         add_simulator("y", sim, observed, epsilon=epsilon, distance=sim.distance)
-        idata = sample_smc_abc(draws=400, executor="serial", random_seed=2, **QUIET)
+        idata = sample_smc_abc(draws=400, executor="serial", random_seed=2, kernel=kernel, **QUIET)
     draws = np.column_stack([idata.posterior[name].values.ravel() for name in ("a", "b")])
     assert (np.abs(draws.mean(axis=0) - mean) < 0.3 * sd).all()
     assert ((draws.std(axis=0) / sd > 0.85) & (draws.std(axis=0) / sd < 1.15)).all()
