@@ -19,8 +19,13 @@ from pymc_vcc.inference.likelihood import log_likelihood
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.series import prepare_observed
+from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies import StudySettings, estimation_study, leak_study
-from pymc_vcc.studies.estimate import smc_sequential_calibration
+from pymc_vcc.studies.estimate import (
+    EstimationResult,
+    _collapse_warnings,
+    smc_sequential_calibration,
+)
 from pymc_vcc.studies.leak import leak_alarm
 from pymc_vcc.testing import SensorProblem
 
@@ -209,6 +214,29 @@ def test_estimate_refuses_an_unknown_distance_before_any_work(tmp_path):
     with pytest.raises(ValueError, match=r"distance must be one of .*, got 'l2'"):
         estimation_study(StudySettings(budget="smoke", out=tmp_path / "e"), distance="l2")
     assert not (tmp_path / "e" / "checkpoints").exists()
+
+
+def test_a_narrowed_inert_parameter_flags_collapsed_particles():
+    """FO_SPEED changes no output: a posterior narrower than 0.7 of its prior marks the
+    dataset's particles as collapsed; the split unit names its inert parameters."""
+    assert set(load_unit().cycle_model.inert_parameters) == {"FO_SPEED", "FI_SPEED"}
+    result = EstimationResult(
+        truths=[],
+        calibration=None,
+        predictive=[],
+        uncalibrated=None,
+        contraction=[
+            {"M0": 0.1, "FO_SPEED": 0.95, "FI_SPEED": 0.65},
+            {"M0": 0.1, "FO_SPEED": 0.9, "FI_SPEED": 0.8},
+        ],
+        covered=[],
+        simulations=[],
+        wall_seconds=0.0,
+        inert_parameters=("FO_SPEED", "FI_SPEED"),
+    )
+    assert result.collapsed == [{"FO_SPEED": 0.95, "FI_SPEED": 0.65}, {}]
+    (line,) = _collapse_warnings(result.collapsed)
+    assert line.startswith("dataset 1:") and "FI_SPEED 0.65" in line
 
 
 def test_estimate_refuses_an_unknown_kernel_before_any_work(tmp_path):

@@ -22,6 +22,7 @@ time-aligned windowed distance).
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -60,6 +61,10 @@ SENSITIVE = ("M0", "CF_VOL", "CF_POW", "CF_PREF", "CF_LEV")
 INTERVAL = 0.95
 """Probability of the central posterior interval checked against the truth."""
 
+COLLAPSE_SD_RATIO = 0.7
+"""Posterior sd over prior sd below which a parameter that changes no output shows collapsed
+particles (with 128 particles the sd of uniform draws scatters by about 6 %)."""
+
 
 @dataclass
 class EstimationResult:
@@ -74,6 +79,7 @@ class EstimationResult:
         covered: whether each truth lies in its central 95 % posterior interval, per dataset.
         simulations: forward simulations the sampler ran, per dataset.
         wall_seconds: wall time of the whole study, s.
+        inert_parameters: the parameters that change no output (the cycle model's).
     """
 
     truths: list[dict[str, float]]
@@ -84,12 +90,25 @@ class EstimationResult:
     covered: list[dict[str, bool]]
     simulations: list[int]
     wall_seconds: float
+    inert_parameters: tuple[str, ...] = ()
     files: list[str] = field(default_factory=list)
 
     @property
     def n_simulations(self) -> int:
         """Forward simulations run by the samplers over both datasets."""
         return sum(self.simulations)
+
+    @property
+    def collapsed(self) -> list[dict[str, float]]:
+        """Per dataset, the sd ratios of the inert parameters if one fell below
+        :data:`COLLAPSE_SD_RATIO` (no data narrows them, so the sampler's particles collapsed
+        and every interval of that dataset is too narrow), else an empty dict."""
+        return [
+            {name: ratios[name] for name in self.inert_parameters if name in ratios}
+            if any(ratios.get(name, 1.0) < COLLAPSE_SD_RATIO for name in self.inert_parameters)
+            else {}
+            for ratios in self.contraction
+        ]
 
     def summary(self) -> dict:
         """The JSON summary: truths, posterior means, contraction, coverage of the truths by
@@ -104,6 +123,7 @@ class EstimationResult:
             "sd_ratio": self.contraction,
             "truth_in_95": self.covered,
             "n_truths_in_95": [sum(flags.values()) for flags in self.covered],
+            "collapsed": self.collapsed,
             "n_simulations": self.n_simulations,
             "simulations_per_dataset": self.simulations,
             "wall_seconds": round(self.wall_seconds, 2),
@@ -126,7 +146,21 @@ class EstimationResult:
             ]
             lines.append(f"{name:10s} " + " ".join(cells))
         inside = " and ".join(f"{sum(flags.values())}/{len(flags)}" for flags in self.covered)
-        return "\n".join([*lines, f"truths inside their 95 % intervals: {inside}"])
+        lines.append(f"truths inside their 95 % intervals: {inside}")
+        lines += _collapse_warnings(self.collapsed)
+        return "\n".join(lines)
+
+
+def _collapse_warnings(collapsed: list[dict[str, float]]) -> list[str]:
+    """One line for each dataset whose particles collapsed (see ``EstimationResult.collapsed``)."""
+    return [
+        f"dataset {k + 1}: the sd ratios of parameters that change no output fell to "
+        + ", ".join(f"{name} {ratio:.2f}" for name, ratio in inert.items())
+        + f" (below {COLLAPSE_SD_RATIO}): the particles collapsed, so this dataset's intervals "
+        "are too narrow; use more particles or a larger epsilon"
+        for k, inert in enumerate(collapsed)
+        if inert
+    ]
 
 
 def draw_reference_parameters(
@@ -363,7 +397,10 @@ def estimation_study(
         ],
         simulations=[int(tree["sample_stats"]["n_simulations"]) for tree in calibration.trees],
         wall_seconds=time.perf_counter() - started,
+        inert_parameters=unit.cycle_model.inert_parameters,
     )
+    for line in _collapse_warnings(result.collapsed):
+        warnings.warn(line, RuntimeWarning, stacklevel=2)
     if settings.out is not None:
         result.files = _write(result, unit, full.inputs, t_calibration, settings)
     return result
