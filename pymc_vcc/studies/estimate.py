@@ -223,8 +223,7 @@ def smc_sequential_calibration(
     the next dataset's prior. SMC-ABC on ``distance`` (default the paper's KS), or with
     ``likelihood`` the exact likelihood under ``sensor_noise`` (known scales), with the mutation
     ``kernel`` (see :func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`), at most ``max_steps``
-    steps per stage. Each tree also gets a ``prior`` group of ``draws``
-    prior draws."""
+    steps per stage. Each tree also gets a ``prior`` group of ``draws`` prior draws."""
     trees: list[xr.DataTree] = []
     priors: list[Prior] = []
     for k, (observed, stage_seed) in enumerate(

@@ -239,7 +239,7 @@ def check_kernel(kernel: str, name: str = "kernel") -> str:
     return kernel
 
 
-class _BatchSimulations:
+class ParallelKernel:
     """What :class:`ParallelIMH` and :class:`ParallelMH` share: the simulations of all
     particles of a mutation step run as one batch through an executor, checkpointed, their
     failures counted; and the stock kernels' mutation loop around it (a subclass supplies the
@@ -464,7 +464,7 @@ class _BatchSimulations:
     def sample_settings(self) -> dict[str, int | float | str]:
         return {
             **super().sample_settings(),
-            "kernel": _KERNEL_NAMES[type(self)],
+            "kernel": next(name for name, kind in KERNELS.items() if isinstance(self, kind)),
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
             "failure_examples": " | ".join(self.failure_reasons),
             "median_log_likelihood": float(np.median(self.likelihood_logp)),
@@ -473,14 +473,14 @@ class _BatchSimulations:
         }
 
 
-class ParallelIMH(_BatchSimulations, IMH):
+class ParallelIMH(ParallelKernel, IMH):
     """PyMC's independent Metropolis–Hastings SMC kernel (proposals from a Gaussian fitted to
     the particles) with the simulations of all particles run as one parallel batch.
 
     Use it as ``pm.sample_smc(kernel=ParallelIMH, executor=ex, chains=1, ...)`` on a model
     with ``pm.Simulator`` nodes (e.g. from :func:`pymc_vcc.inference.pymc.model.add_simulator`), or
     through :func:`sample_smc_abc`, which picks defaults suited to expensive simulators. Its
-    arguments are those of :class:`_BatchSimulations`.
+    arguments are those of :class:`ParallelKernel`.
     """
 
     stats_dtypes_shapes: ClassVar[dict[str, tuple[type, list]]] = {
@@ -499,14 +499,13 @@ class ParallelIMH(_BatchSimulations, IMH):
         self.acc_rate = np.mean(accepted_steps)
 
 
-class ParallelMH(_BatchSimulations, MH):
+class ParallelMH(ParallelKernel, MH):
     """PyMC's random-walk Metropolis–Hastings SMC kernel (Gaussian steps with the particles'
     covariance, each particle's scale tuned towards 23.4 % acceptance) with the simulations
     of all particles run as one parallel batch; arguments as :class:`ParallelIMH`'s.
 
-    Where the posterior is far from Gaussian (curved, or correlated across many dimensions),
-    independent proposals drawn from the particles' Gaussian are rarely accepted; local steps
-    still are.
+    Its local steps suit posteriors far from Gaussian (curved), where independent proposals
+    from the particles' Gaussian land in the tails; they explore more slowly where it is not.
     """
 
     stats_dtypes_shapes: ClassVar[dict[str, tuple[type, list]]] = {
@@ -523,12 +522,10 @@ class ParallelMH(_BatchSimulations, MH):
         self.chain_acc_rate = np.mean(accepted_steps, axis=0)
 
 
-KERNELS: dict[str, type[_BatchSimulations]] = dict(
+KERNELS: dict[str, type[ParallelKernel]] = dict(
     zip(SMC_KERNELS, (ParallelIMH, ParallelMH), strict=True)
 )
 """The parallel kernel of each name in :data:`~pymc_vcc.inference.samplers.SMC_KERNELS`."""
-
-_KERNEL_NAMES = {kernel: name for name, kernel in KERNELS.items()}
 
 
 def _graph_digest(variables: Sequence) -> str:
@@ -746,4 +743,4 @@ def _with_run_summary(tree: DataTree, model: Model) -> DataTree:
     return tree
 
 
-__all__ = ["KERNELS", "ParallelIMH", "ParallelMH", "sample_smc_abc"]
+__all__ = ["KERNELS", "ParallelIMH", "ParallelKernel", "ParallelMH", "sample_smc_abc"]
