@@ -399,7 +399,7 @@ def estimation_study(
         inert_parameters=unit.cycle_model.inert_parameters,
     )
     for line in _collapse_warnings(result.collapsed):
-        warnings.warn(line, RuntimeWarning, stacklevel=2)
+        warnings.warn(line, RuntimeWarning, stacklevel=3)  # at the caller of the study
     if settings.out is not None:
         result.files = _write(result, unit, full.inputs, t_calibration, settings)
     return result
