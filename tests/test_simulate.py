@@ -51,9 +51,10 @@ def test_full_profile_runs_with_units_and_diagnostics(full_runs, solver):
         assert np.isfinite(run[name].values).all()
     for key in ("n_rhs", "n_steps", "wall_time", "mass_error", "source_integral"):
         assert key in run.attrs
-    # work budgets: a silent slowdown shows here (CVODE does not report its steps)
+    # work budgets: a silent slowdown shows here (measured: Radau ~300 steps of order 5, CVODE
+    # 2089 short steps of order <= 3, each with ~1.2 right-hand sides)
     assert 0 < run.attrs["n_rhs"] < 6000 and 0 < run.attrs["n_jac"] < 400
-    assert 0 < run.attrs["n_steps"] < 2000 or (solver == "cvode" and run.attrs["n_steps"] == -1)
+    assert 0 < run.attrs["n_steps"] < {"radau": 2000, "cvode": 4000}[solver]
 
 
 @pytest.mark.parametrize("unit_name", ["split_3p5kw_r410a.toml", "heat_pump_3p5kw_r410a.toml"])

@@ -4,8 +4,7 @@ For each solver of :data:`~pymc_vcc.physics.solvers.METHODS` (``_<solver>`` suff
 
 * ``sim_seconds_median``/``_min`` (wall) and ``sim_cpu_seconds_median`` (process CPU time, steadier
   on a shared machine): one 1060 s simulation of the built-in profile at nominal parameters, one
-  process, after a warm-up run; its ``rhs_evals``, ``jac_evals`` and ``solver_steps`` (-1: CVODE
-  does not report them);
+  process, after a warm-up run; its ``rhs_evals``, ``jac_evals`` and ``solver_steps``;
 * ``sims_per_second`` and ``failure_rate``: 1060 s simulations of uniform draws from the Table
   III box on all cores (a process pool), with the failure kinds counted, and
   ``sims_per_cpu_second`` (draws over the CPU time the workers spent on them: what one idle core

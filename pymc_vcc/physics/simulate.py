@@ -19,7 +19,7 @@ import numpy as np
 import xarray as xr
 from threadpoolctl import ThreadpoolController
 
-from pymc_vcc.physics.binding import bind
+from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.cycles.base import CycleModel
 from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.inputs import (
@@ -102,7 +102,7 @@ def simulate(
     xarray.Dataset
         Variables ``TD, PD, TS, PS, TC, PC, TE, PE, MDOT`` over ``time`` with ``units`` attrs;
         attrs ``status`` ("ok" | "failed"), ``failure_reason``, ``solver``, ``n_rhs``,
-        ``n_jac``, ``n_steps`` (-1 for cvode), ``wall_time`` (s), ``mass_error`` (max |M - M0|/M0
+        ``n_jac``, ``n_steps``, ``wall_time`` (s), ``mass_error`` (max |M - M0|/M0
         on the grid), ``source_integral`` (∫|ṁ_src| dt, kg).
     """
     unit = _builtin_unit() if unit is None else unit
@@ -194,32 +194,23 @@ def simulate(
 def _integrate(model, y, c, tables, edges, held, times, states, solver, deadline):
     """Fill ``states`` on ``times`` segment by segment; return the :class:`Failure` or None."""
     dydt = np.empty(y.size)
-    out = np.empty(model.n_eval)
-    # every segment and both solvers pass arrays of these same types
-    evaluate = bind(model.evaluate, y, held[0], c, tables, dydt, out)
-    jacobian = bind(model.jacobian, y, held[0], c, tables, dydt)
+    cycle = BoundCycle(model, y, held[0], c, tables)
     for k, u in enumerate(held):
         t0, t1 = float(edges[k]), float(edges[k + 1])
         last = k == len(held) - 1
-
-        def rhs(state, derivative, u=u):
-            return evaluate(state, u, c, tables, derivative, out)
-
-        def jac(state, f, u=u):
-            return jacobian(state, u, c, tables, f)
-
+        cycle.u[:] = u
         in_segment = (times >= t0) & ((times < t1) | (last & (times <= t1)))
         pending = np.flatnonzero(in_segment)
         if pending.size and times[pending[0]] == t0:
             states[pending[0]] = y
             pending = pending[1:]
-        if not evaluate(y, u, c, tables, dydt, out):
+        if not cycle.rhs(y, dydt):
             return Failure(
                 FailureKind.PROPERTY_RANGE,
                 f"right-hand side not finite at t = {t0:.1f} s (property out of range)",
             )
         filled = np.full((pending.size, y.size), np.nan)
-        y, failure = solver.integrate(rhs, jac, y, t0, t1, times[pending], filled, deadline)
+        y, failure = solver.integrate(cycle, y, t0, t1, times[pending], filled, deadline)
         states[pending] = filled
         if failure is not None:
             return failure

@@ -4,13 +4,15 @@ Both solvers implement one small interface, :class:`SegmentSolver`: integrate ``
 from ``t0`` to ``t1``, fill the states at the output times inside the segment by the solver's
 own interpolation, stop at a wall-clock deadline, count the work, and never raise: a failure is
 returned as a :class:`~pymc_vcc.physics.failures.Failure` (kind and one-line detail). The caller
-(:mod:`pymc_vcc.physics.simulate`) knows the model; this module knows only
-``rhs(y, dydt) -> finite`` and ``jac(y, f) -> ∂f/∂y``.
+(:mod:`pymc_vcc.physics.simulate`) knows the model; this module knows only a
+:class:`SegmentModel`: ``rhs(y, dydt) -> finite``, ``jac(y, f) -> ∂f/∂y`` and the same two as
+C callbacks.
 
 * ``radau``: scipy's 5th-order implicit Runge-Kutta, stepped from Python; the reference.
 * ``cvode``: SUNDIALS CVODE (BDF of orders 1 to :data:`CVODE_MAX_ORDER`, dense direct linear
-  solver, Jacobian reused across steps) through ``scikit-sundae``; its whole step loop and the
-  output interpolation run in C, so the model's kernels dominate the cost.
+  solver, Jacobian reused across steps) from scikit-sundae's libraries, calling the model's
+  Numba kernels as C callbacks (:mod:`pymc_vcc.physics.sundials`): its step loop, the model
+  and the output interpolation all run in machine code.
 
 At equal tolerances BDF's error control lets more global error through than Radau's, so CVODE
 runs at :data:`CVODE_TOLERANCE_SCALE` times the unit's tolerances. Against an rtol 1e-8
@@ -22,10 +24,7 @@ Radau on a draw (2.0e-2 against 5.0e-3).
 
 from __future__ import annotations
 
-import contextlib
-import io
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -33,6 +32,7 @@ import numpy as np
 from scipy.integrate import Radau
 from scipy.linalg import get_lapack_funcs
 
+from pymc_vcc.physics import sundials
 from pymc_vcc.physics.failures import Failure, FailureKind
 
 METHODS: tuple[str, ...] = ("radau", "cvode")
@@ -50,11 +50,26 @@ starts by itself (box draw 33 of ``tests/test_solvers.py``: MDOT falls 25 % with
 largest error 59 % (order 5) against 0.9 % (order 3) of an output's range; Radau at the unit's
 tolerances 11 %."""
 
-Rhs = Callable[[np.ndarray, np.ndarray], bool]
-"""``rhs(y, dydt)``: write f(y) into ``dydt``; return False when it is not finite."""
 
-Jac = Callable[[np.ndarray, np.ndarray], np.ndarray]
-"""``jac(y, f)``: the Jacobian ∂f/∂y at ``y``, given ``f = f(y)``."""
+class SegmentModel(Protocol):
+    """The right-hand side of one input segment, as Python callables and as C callbacks."""
+
+    def rhs(self, y: np.ndarray, dydt: np.ndarray) -> bool:
+        """Write f(y) into ``dydt``; return False when it is not finite."""
+        ...
+
+    def jac(self, y: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """The Jacobian ∂f/∂y at ``y``, given ``f = f(y)``."""
+        ...
+
+    def c_callbacks(self) -> sundials.Callbacks:
+        """The same two as C callbacks (compiled on the first call)."""
+        ...
+
+    @property
+    def bad_rhs(self) -> int:
+        """C right-hand sides so far that were not finite."""
+        ...
 
 
 def _wall_clock_failure(limit: float, t: float) -> Failure:
@@ -66,10 +81,7 @@ def _wall_clock_failure(limit: float, t: float) -> Failure:
 
 @dataclass
 class Counters:
-    """Work done so far, summed over segments.
-
-    ``n_steps`` is -1 for CVODE: scikit-sundae does not report its internal step count.
-    """
+    """Work done so far, summed over segments."""
 
     n_rhs: int = 0
     n_jac: int = 0
@@ -84,8 +96,7 @@ class SegmentSolver(Protocol):
 
     def integrate(
         self,
-        rhs: Rhs,
-        jac: Jac,
+        model: SegmentModel,
         y0: np.ndarray,
         t0: float,
         t1: float,
@@ -112,17 +123,8 @@ def make_solver(
     raise ValueError(f"solver method must be one of {list(METHODS)}, got {method!r}")
 
 
-_HUGE = 1e30
-"""Stands in for a non-finite derivative in CVODE, so that the step fails and is retried."""
-
-
 class _WallClockLimit(Exception):
     """Raised from inside a right-hand side when the run passes its deadline."""
-
-
-def _clean(matrix: np.ndarray) -> np.ndarray:
-    """Columns that left the property tables are zeroed: the step-size control backs off."""
-    return np.nan_to_num(matrix, nan=0.0, posinf=0.0, neginf=0.0)
 
 
 class RadauSolver:
@@ -132,8 +134,9 @@ class RadauSolver:
         self.rtol, self.atol, self.max_step, self.wall_limit = rtol, atol, max_step, wall_limit
         self.counters = Counters()
 
-    def integrate(self, rhs, jac, y0, t0, t1, t_out, states_out, deadline):
+    def integrate(self, model, y0, t0, t1, t_out, states_out, deadline):
         counters, limit = self.counters, self.wall_limit
+        rhs, jac = model.rhs, model.jac
         dydt = np.empty(y0.size)
 
         def fun(t, y):
@@ -147,7 +150,8 @@ class RadauSolver:
         def jacobian(t, y):
             counters.n_jac += 1
             rhs(y, dydt)
-            return _clean(jac(y, dydt.copy()))
+            # columns that left the property tables are zeroed: the step-size control backs off
+            return np.nan_to_num(jac(y, dydt.copy()), nan=0.0, posinf=0.0, neginf=0.0)
 
         try:
             solver = Radau(
@@ -175,7 +179,8 @@ class RadauSolver:
                 )
             counters.n_steps += 1
             if solver.status == "failed":
-                return solver.y, _failure(solver.t, message or "Radau failed", counters)
+                reason = message or "Radau failed"
+                return solver.y, _failure(solver.t, reason, counters.bad_rhs)
             if not np.isfinite(solver.y).all():
                 return solver.y, Failure(
                     FailureKind.NON_FINITE, f"non-finite state at t = {solver.t:.2f} s"
@@ -189,9 +194,10 @@ class RadauSolver:
         return solver.y, None
 
 
-def _failure(t: float, message: str, counters: Counters) -> Failure:
-    if counters.bad_rhs:
-        message += f" (property out of range in {counters.bad_rhs} evaluations)"
+def _failure(t: float, message: str, bad_rhs: int) -> Failure:
+    """A solver failure at ``t`` (s), naming the right-hand sides that were not finite."""
+    if bad_rhs:
+        message += f" (property out of range in {bad_rhs} evaluations)"
     return Failure(FailureKind.SOLVER, f"solver failure at t = {t:.2f} s: {message}")
 
 
@@ -221,10 +227,12 @@ def _use_direct_lapack(solver: Radau) -> None:
 
 
 class CvodeSolver:
-    """SUNDIALS CVODE (BDF, orders 1 to :data:`CVODE_MAX_ORDER`, dense LU) through scikit-sundae.
+    """SUNDIALS CVODE (BDF, orders 1 to :data:`CVODE_MAX_ORDER`, dense LU) called directly, with
+    the model's C callbacks (:mod:`pymc_vcc.physics.sundials`).
 
-    One CVODE instance serves every segment (re-initialised at each segment's start); the
-    outputs come from CVODE's own interpolation in normal mode, so it never stops at them.
+    One CVODE instance serves every segment (re-initialised at each segment's start, which
+    stops it at the segment's end); the outputs come from CVODE's own interpolation in normal
+    mode, so it never stops at them. The wall clock is read between output times.
     """
 
     MAX_STEPS = 20_000
@@ -235,77 +243,37 @@ class CvodeSolver:
     10 ε t) instead of creeping towards a state where a property leaves its table."""
 
     def __init__(self, rtol: float, atol: np.ndarray, max_step: float, wall_limit: float):
-        from sksundae.cvode import CVODE
-
-        self.counters = Counters(n_steps=-1)
+        self.counters = Counters()
         self.wall_limit = wall_limit
-        self._rhs: Rhs | None = None
-        self._jac: Jac | None = None
-        self._deadline = 0.0
-        self._t = 0.0  # time of the latest right-hand side, s
-        # CVODE hands read-only views of its vectors; the model gets writable copies, so the
-        # Numba kernels are compiled (and cached) for one array type only
-        self._y = np.empty(atol.size)
-        self._f = np.empty(atol.size)
-        self._cvode = CVODE(
-            self._rhs_callback,
-            jacfn=self._jac_callback,
-            rtol=rtol * CVODE_TOLERANCE_SCALE,
-            atol=atol * CVODE_TOLERANCE_SCALE,
-            max_step=max_step,
-            min_step=self.MIN_STEP,
-            max_num_steps=self.MAX_STEPS,
-            max_order=CVODE_MAX_ORDER,
-        )
+        self._settings = (rtol * CVODE_TOLERANCE_SCALE, atol * CVODE_TOLERANCE_SCALE, max_step)
+        self._cvode: sundials.Cvode | None = None
 
-    def _rhs_callback(self, t: float, y: np.ndarray, dydt: np.ndarray) -> None:
-        self.counters.n_rhs += 1
-        self._t = t
-        self._y[:] = y
-        assert self._rhs is not None, "integrate() sets the model before CVODE calls back"
-        if not self._rhs(self._y, dydt):
-            # scikit-sundae cannot pass CVODE a recoverable error, and CVODE's tests let NaN
-            # through: a huge finite derivative fails the step, which is retried shorter
-            self.counters.bad_rhs += 1
-            np.nan_to_num(dydt, copy=False, nan=_HUGE, posinf=_HUGE, neginf=-_HUGE)
-        if time.perf_counter() > self._deadline:
-            raise _WallClockLimit
-
-    def _jac_callback(self, t: float, y: np.ndarray, f: np.ndarray, matrix: np.ndarray) -> None:
-        self.counters.n_jac += 1
-        self._y[:] = y
-        self._f[:] = f
-        assert self._jac is not None, "integrate() sets the model before CVODE calls back"
-        matrix[:, :] = _clean(self._jac(self._y, self._f))
-
-    def integrate(self, rhs, jac, y0, t0, t1, t_out, states_out, deadline):
-        self._rhs, self._jac, self._deadline = rhs, jac, deadline
+    def integrate(self, model, y0, t0, t1, t_out, states_out, deadline):
+        if self._cvode is None:
+            rtol, atol, max_step = self._settings
+            self._cvode = sundials.Cvode(model.c_callbacks(), atol.size, rtol, atol)
+            self._cvode.configure(CVODE_MAX_ORDER, self.MAX_STEPS, self.MIN_STEP, max_step)
+        cvode = self._cvode
+        cvode.restart(t0, y0, t1)
         ends_on_output = t_out.size > 0 and t_out[-1] == t1
-        tspan = np.concatenate(([t0], t_out, [] if ends_on_output else [t1]))
-        try:
-            # scikit-sundae prints SUNDIALS' failures; the run's failure reason carries them
-            with contextlib.redirect_stdout(io.StringIO()):
-                result = self._cvode.solve(tspan, y0)
-        except _WallClockLimit:
-            return y0, _wall_clock_failure(self.wall_limit, self._t)
-        except Exception as error:
-            return y0, Failure(
-                FailureKind.SOLVER,
-                f"solver failure after t = {t0:.2f} s: {type(error).__name__}: {error}",
-            )
-        if tspan.size == 2:  # scikit-sundae then returns every internal step: keep t1 only
-            rows = result.y[-1:] if result.success else result.y[:0]
-        else:  # the output times reached, then t1 (on failure: where it stopped, dropped)
-            rows = result.y[1 : len(result.t) - (not result.success)]
-        reached = min(len(rows), t_out.size)
-        states_out[:reached] = rows[:reached]
-        y_end = result.y[-1]
-        finite = np.isfinite(result.y).all(axis=1)
-        if not finite.all():
-            return y_end, Failure(
-                FailureKind.NON_FINITE,
-                f"non-finite state at t = {result.t[np.argmin(finite)]:.2f} s",
-            )
-        if not result.success:
-            return y_end, _failure(float(result.t[-1]), result.message, self.counters)
-        return y_end, None
+        targets = t_out if ends_on_output else np.append(t_out, t1)
+        failure = None
+        for row, target in enumerate(targets):
+            if time.perf_counter() > deadline:
+                failure = _wall_clock_failure(self.wall_limit, cvode.t)
+                break
+            flag, t = cvode.advance(target)
+            if flag < 0:
+                failure = _failure(t, sundials.flag_name(flag), model.bad_rhs)
+                break
+            if not np.isfinite(cvode.y).all():
+                failure = Failure(FailureKind.NON_FINITE, f"non-finite state at t = {t:.2f} s")
+                break
+            if row < t_out.size:
+                states_out[row] = cvode.y
+        n_steps, n_rhs, n_jac = cvode.statistics()
+        self.counters.n_steps += n_steps
+        self.counters.n_rhs += n_rhs
+        self.counters.n_jac += n_jac
+        self.counters.bad_rhs = model.bad_rhs
+        return cvode.y.copy(), failure

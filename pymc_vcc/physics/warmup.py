@@ -16,7 +16,6 @@ digest of every source file of the physics package.
 
 from __future__ import annotations
 
-import hashlib
 import multiprocessing
 import sys
 import threading
@@ -27,6 +26,8 @@ import numpy as np
 import xarray as xr
 from numba.core.dispatcher import Dispatcher
 
+from pymc_vcc.physics import source_digest
+from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.cycles import CycleModel
 from pymc_vcc.physics.inputs import INPUT_IDS, constant_inputs, input_segments
 from pymc_vcc.physics.unit import Unit
@@ -38,11 +39,8 @@ TYPICAL_COMPILE_SECONDS = 40
 """CPU time of a cold compile of the cycle model, s (37 s measured; the wall time grows with
 the machine's load: 62 to 500 s on a shared 2-core machine)."""
 
-PHYSICS_SOURCES = Path(__file__).parent
-"""Every cached Numba kernel of the package is defined below this folder..."""
-
 PHYSICS_PACKAGE = __name__.rpartition(".")[0]
-"""... in the modules of this package."""
+"""Every cached Numba kernel of the package is defined in the modules of this package."""
 
 STAMP_NAME = "pymc_vcc-physics-sources.digest"
 """File beside the cycle's cached kernels: the digest of the sources they were compiled from."""
@@ -66,14 +64,6 @@ def _is_cached(model: CycleModel) -> bool:
         return Path(kernel._cache._cache_file._index_path).exists()
     except AttributeError:  # Numba internals changed: assume a compile
         return False
-
-
-def source_digest() -> str:
-    """Digest of every Python source file of the physics package (hex)."""
-    digest = hashlib.blake2b(digest_size=16)
-    for path in sorted(PHYSICS_SOURCES.rglob("*.py")):
-        digest.update(path.read_bytes())
-    return digest.hexdigest()
 
 
 def _loaded_cache_indexes() -> list[Path]:
@@ -126,6 +116,7 @@ def _run_kernels(unit: Unit) -> None:
     dydt = np.empty(y.size)
     model.evaluate(y, u, c, tables, dydt, np.empty(model.n_eval))
     model.jacobian(y, u, c, tables, dydt.copy())
+    BoundCycle(model, y, u, c, tables).c_callbacks()  # CVODE's C callbacks
     model.outputs_along(y[np.newaxis, :], u[np.newaxis, :], c, tables, False)
     xr.Dataset({"y": ("time", y)})  # xarray imports its array backends on first use (seconds)
 
