@@ -45,6 +45,30 @@ def test_the_first_run_with_an_empty_cache_passes_and_matches_a_warm_one(tmp_pat
     warm = simulate(t_end=100.0)
     for name in warm.data_vars:
         np.testing.assert_array_equal(first[name].values, warm[name].values)
+    # a second process (a sampler's worker) loads CVODE's C callbacks from the same cache
+    second = subprocess.run(
+        [sys.executable, "-c", SECOND_RUN],
+        env={**os.environ, **caches},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert second.returncode == 0, second.stderr
+    assert second.stdout.split() == ["ok", "2", "2"], second.stdout
+
+
+SECOND_RUN = textwrap.dedent(
+    """
+    from pymc_vcc.physics import callbacks
+    from pymc_vcc.physics.simulate import simulate
+
+    made = []
+    compile_callback = callbacks._compiled
+    callbacks._compiled = lambda *arguments: made.append(compile_callback(*arguments)) or made[-1]
+    result = simulate(t_end=10.0, solver="cvode")
+    print(result.attrs["status"], len(made), sum(callback.cache_hits for callback in made))
+    """
+)
 
 
 STALE_CACHE = textwrap.dedent(

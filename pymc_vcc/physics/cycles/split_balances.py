@@ -70,6 +70,9 @@ if TYPE_CHECKING:
 
 N_EVAL = len(OUTPUT_INFO) + len(DIAGNOSTIC_INFO)
 
+MEMO_COLUMNS = 10
+"""A remembered coil cell heat: p, T_wall, flow ratio, h_in, x_in, T_in, h, x, T, then the heat."""
+
 
 @njit(cache=True, error_model="numpy")
 def hot_gas_line(at):
@@ -109,9 +112,41 @@ def evaluate(y, u, constants, tables, dydt, out):
 
 
 @njit(cache=True, error_model="numpy")
-def balances(y, u, c, tables, props, dydt, out, rates=True):
+def remembered_cell_heat(
+    memo, row, tables, sat, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T
+):
+    """:func:`coil_cell_heat`, taken from row ``row`` of ``memo`` when the row holds these same
+    arguments (the coil and tables aside) and worked out afresh otherwise. With ``memo`` None it
+    always works it out; a row of NaN matches nothing."""
+    if memo is None:
+        return coil_cell_heat(tables, sat, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T)
+    m = memo[row]
+    if (
+        m[0] == p and m[1] == T_wall and m[2] == flow_ratio and m[3] == h_in and m[4] == x_in
+        and m[5] == T_in and m[6] == h and m[7] == x and m[8] == T
+    ):  # fmt: skip
+        return m[9]
+    return coil_cell_heat(tables, sat, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T)
+
+
+@njit(cache=True, error_model="numpy")
+def remember_cell_heat(memo, row, p, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T, q):
+    """Keep heat ``q`` and its arguments in row ``row`` of ``memo`` (None: nothing)."""
+    if memo is not None:
+        m = memo[row]
+        m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9] = (
+            p, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T, q
+        )  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=False):
     """:func:`evaluate` given the cell properties ``props`` of every cell; with ``rates``
-    False the outputs alone (walls and zones skipped: ``dydt`` untouched, the heats NaN)."""
+    False the outputs alone (walls and zones skipped: ``dydt`` untouched, the heats NaN).
+
+    ``memo`` (2 N rows of :data:`MEMO_COLUMNS`: condenser cells, then evaporator cells) holds
+    coil cell heats with their arguments: a cell whose arguments match its row reuses the heat
+    (a Jacobian column changes few cells); with ``remember`` the rows take this call's."""
     at = c.layout
     n = at.h_liquid_line - at.h_cond
     heating = hot_gas_line(at)
@@ -221,9 +256,12 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
             h_in, x_in, T_in = (
                 (h_in_c, x_in_c, T_in_c) if k == 0 else (h_zc[k - 1], x_c[k - 1], T_c[k - 1])
             )
-            q_ref = coil_cell_heat(
-                tables, point_c, p_c, cond, tw, flow_c, h_in, x_in, T_in, h_zc[k], x_c[k], T_c[k]
+            h, x, T = h_zc[k], x_c[k], T_c[k]
+            q_ref = remembered_cell_heat(
+                memo, i, tables, point_c, p_c, cond, tw, flow_c, h_in, x_in, T_in, h, x, T
             )
+            if remember:
+                remember_cell_heat(memo, i, p_c, tw, flow_c, h_in, x_in, T_in, h, x, T, q_ref)
             q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
             dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
             src_c[k] = q_ref
@@ -232,9 +270,12 @@ def balances(y, u, c, tables, props, dydt, out, rates=True):
             h_in, x_in, T_in = (
                 (h_zc[nc - 1], x_in_e, T_in_e) if i == 0 else (h_ze[i - 1], x_e[i - 1], T_e[i - 1])
             )
-            q_ref = coil_cell_heat(
-                tables, point_e, p_e, evap, tw, flow_e, h_in, x_in, T_in, h_ze[i], x_e[i], T_e[i]
+            h, x, T = h_ze[i], x_e[i], T_e[i]
+            q_ref = remembered_cell_heat(
+                memo, n + i, tables, point_e, p_e, evap, tw, flow_e, h_in, x_in, T_in, h, x, T
             )
+            if remember:
+                remember_cell_heat(memo, n + i, p_e, tw, flow_e, h_in, x_in, T_in, h, x, T, q_ref)
             q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
             if not heating:  # the indoor coil evaporates: sensible and latent load
                 q_sensible += q_air
@@ -327,9 +368,12 @@ def jacobian(y, u, constants, tables, f0):
     work = y.copy()
     dydt = np.empty(y.size)
     out = np.empty(N_EVAL)
+    n = c.layout.h_liquid_line - c.layout.h_cond
+    memo = np.full((2 * n, MEMO_COLUMNS), np.nan)
+    balances(y, u, c, tables, props, dydt, out, True, memo, True)  # the cells' heats at y
     for j in range(y.size):
         step = perturb(y, work, j, zones, tables, props)
-        balances(work, u, c, tables, props, dydt, out)
+        balances(work, u, c, tables, props, dydt, out, True, memo, False)
         for i in range(y.size):
             jac[i, j] = (dydt[i] - f0[i]) / step
         restore(y, work, j, zones, props, saved)
