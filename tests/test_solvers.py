@@ -167,3 +167,15 @@ def test_solvers_agree_over_box_draws():
     # CVODE 3.9 %, so there the reference solver needs tighter tolerances (open in issue 15)
     assert sorted(differences)[-2] < 4e-2
     assert np.quantile(differences, 0.9) < 1e-3
+
+
+def test_a_scikit_sundae_built_otherwise_is_refused_by_name(monkeypatch):
+    """CVODE is called through ctypes with the memory layout of a 32-bit-index SUNDIALS 7:
+    another build would corrupt memory, so it is refused before anything is loaded."""
+    from sksundae import _cy_common
+
+    from pymc_vcc.physics import sundials
+
+    monkeypatch.setattr(_cy_common, "SUNDIALS_INT_TYPE", "long int")
+    with pytest.raises(ImportError, match=r"SUNDIALS_INT_TYPE = 'int'.*built with 'long int'"):
+        sundials._library_folder()

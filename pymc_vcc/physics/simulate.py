@@ -30,7 +30,7 @@ from pymc_vcc.physics.inputs import (
     validate_inputs,
     window,
 )
-from pymc_vcc.physics.solvers import METHODS, make_solver
+from pymc_vcc.physics.solvers import check_method, make_solver
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.physics.warmup import ensure_compiled
 
@@ -116,9 +116,7 @@ def simulate(
     if not dt > 0:
         raise ValueError(f"output_interval must be positive, got {dt}")
     limit = unit.solver.max_wall_time if max_wall_time is None else float(max_wall_time)
-    method = unit.solver.method if solver is None else solver
-    if method not in METHODS:
-        raise ValueError(f"solver must be one of {list(METHODS)}, got {method!r}")
+    method = check_method(unit.solver.method if solver is None else solver)
 
     started = time.perf_counter()
     edges, held = input_segments(inputs)
@@ -275,9 +273,8 @@ class VCCSimulator:
         self._run_inputs = self.inputs if t_stop == end else window(self.inputs, t_stop)
         self.controller = controller
         self.max_wall_time = max_wall_time
-        if solver is not None and solver not in METHODS:
-            raise ValueError(f"solver must be one of {list(METHODS)}, got {solver!r}")
         self.solver = solver
+        check_method(self.unit.solver.method if solver is None else solver)
         self.allow_outside_unit_bounds = allow_outside_unit_bounds
         ensure_compiled(self.unit)
 

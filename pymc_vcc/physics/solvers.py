@@ -111,16 +111,24 @@ class SegmentSolver(Protocol):
         ...
 
 
+def check_method(method: str) -> str:
+    """``method`` if it names a solver that can run here: ``ValueError`` naming the choices
+    otherwise, ``ImportError`` if CVODE's libraries do not fit (see :mod:`.sundials`)."""
+    if method not in METHODS:
+        raise ValueError(f"solver must be one of {list(METHODS)}, got {method!r}")
+    if method == "cvode":
+        sundials.library()
+    return method
+
+
 def make_solver(
     method: str, rtol: float, atol: np.ndarray, max_step: float, wall_limit: float
 ) -> SegmentSolver:
     """A fresh solver called ``method`` (one of :data:`METHODS`) with these tolerances, the
     largest step (s) and the wall-clock limit (s, only named in failure reasons)."""
-    if method == "radau":
+    if check_method(method) == "radau":
         return RadauSolver(rtol, atol, max_step, wall_limit)
-    if method == "cvode":
-        return CvodeSolver(rtol, atol, max_step, wall_limit)
-    raise ValueError(f"solver method must be one of {list(METHODS)}, got {method!r}")
+    return CvodeSolver(rtol, atol, max_step, wall_limit)
 
 
 class _WallClockLimit(Exception):

@@ -80,17 +80,31 @@ _PROTOTYPES: dict[str, dict[str, tuple]] = {
 }
 
 
+BUILD = {"SUNDIALS_VERSION": "7.", "SUNDIALS_INT_TYPE": "int", "SUNDIALS_FLOAT_TYPE": "double"}
+"""The scikit-sundae build whose layouts this module reads (a version is matched by prefix)."""
+
+
 def _library_folder() -> Path:
-    """Where scikit-sundae's wheel keeps its SUNDIALS libraries."""
+    """Where scikit-sundae's wheel keeps its SUNDIALS libraries, after checking its build."""
     spec = importlib.util.find_spec("sksundae")
     if spec is None or spec.origin is None:
         raise ImportError("the cvode solver needs scikit-sundae: pip install scikit-sundae")
+    from sksundae import _cy_common
+
+    for name, expected in BUILD.items():
+        found = str(getattr(_cy_common, name, "unknown"))
+        if not found.startswith(expected):
+            raise ImportError(
+                f"the cvode solver reads SUNDIALS' memory layout for {name} = {expected!r}..., "
+                f"but scikit-sundae was built with {found!r}: install scikit-sundae 1.1 or 1.2"
+            )
     return Path(spec.origin).parent.parent / "scikit_sundae.libs"
 
 
 @functools.cache
 def library() -> SimpleNamespace:
-    """The SUNDIALS functions this module calls, typed (loaded once per process)."""
+    """The SUNDIALS functions this module calls, typed (loaded once per process);
+    ``ImportError`` naming the problem when scikit-sundae's build does not fit."""
     folder = _library_folder()
     functions = {}
     for part, prototypes in _PROTOTYPES.items():
