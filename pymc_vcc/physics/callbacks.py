@@ -52,14 +52,27 @@ def _table_record(tables: PropertyTables) -> np.void:
 
 
 @njit(cache=True)
-def _array_at(address, shape):
-    """The float64 array at ``address`` with the 1- to 4-entry ``shape``."""
-    return carray(as_pointer(address), shape, np.float64)
+def _vector_at(address, shape):
+    """The float64 vector at ``address`` of ``shape`` (one entry)."""
+    return carray(as_pointer(address), (shape[0],), np.float64)
+
+
+@njit(cache=True)
+def _array3_at(address, shape):
+    """The float64 3-D array at ``address`` of ``shape``."""
+    return carray(as_pointer(address), (shape[0], shape[1], shape[2]), np.float64)
+
+
+@njit(cache=True)
+def _array4_at(address, shape):
+    """The float64 4-D array at ``address`` of ``shape``."""
+    return carray(as_pointer(address), (shape[0], shape[1], shape[2], shape[3]), np.float64)
 
 
 @njit(cache=True)
 def tables_at(r):
-    """The :class:`PropertyTables` whose addresses record ``r`` holds (no copy)."""
+    """The :class:`PropertyTables` whose addresses record ``r`` (:func:`_table_record`)
+    holds, no copy; its fields in the NamedTuple's order (``tests/test_callbacks.py`` checks)."""
     return PropertyTables(
         r.p_min,
         r.p_max,
@@ -67,13 +80,13 @@ def tables_at(r):
         r.T_crit,
         r.T_min,
         r.T_max,
-        _array_at(r.sat_p_address, (r.sat_p_shape[0],)),
-        _array_at(r.sat_curves_address, (r.sat_curves_shape[0], r.sat_curves_shape[1], 2)),
-        _array_at(r.table_p_address, (r.table_p_shape[0],)),
-        _array_at(r.liquid_xi_address, (r.liquid_xi_shape[0],)),
-        _array_at(r.vapour_xi_address, (r.vapour_xi_shape[0],)),
-        _array_at(r.liquid_address, (r.liquid_shape[0], r.liquid_shape[1], 3, 4)),
-        _array_at(r.vapour_address, (r.vapour_shape[0], r.vapour_shape[1], 3, 4)),
+        _vector_at(r.sat_p_address, r.sat_p_shape),
+        _array3_at(r.sat_curves_address, r.sat_curves_shape),
+        _vector_at(r.table_p_address, r.table_p_shape),
+        _vector_at(r.liquid_xi_address, r.liquid_xi_shape),
+        _vector_at(r.vapour_xi_address, r.vapour_xi_shape),
+        _array4_at(r.liquid_address, r.liquid_shape),
+        _array4_at(r.vapour_address, r.vapour_shape),
     )
 
 
@@ -209,10 +222,11 @@ class BoundCycle:
         """The right-hand side and Jacobian as C callbacks reading this object's arrays."""
         if self._data is None:
             self._data = CallbackData(self.n_states, self.u, self.c, self.out, self.tables)
-        model = type(self.model)
+        model = self.model
         rhs, jac = c_callbacks(model.evaluate, model.jacobian, self._data.dtype, self.c.dtype)
         return Callbacks(rhs.address, jac.address, self._data.address, self._data)
 
     @property
     def bad_rhs(self) -> int:
+        """C right-hand sides so far that were not finite."""
         return 0 if self._data is None else self._data.bad_rhs
