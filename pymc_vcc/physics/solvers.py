@@ -238,9 +238,10 @@ class CvodeSolver:
     """SUNDIALS CVODE (BDF, orders 1 to :data:`CVODE_MAX_ORDER`, dense LU) called directly, with
     the model's C callbacks (:mod:`pymc_vcc.physics.sundials`).
 
-    One CVODE instance serves every segment (re-initialised at each segment's start, which
-    stops it at the segment's end); the outputs come from CVODE's own interpolation in normal
-    mode, so it never stops at them. The wall clock is read between output times.
+    One CVODE instance serves every segment of a model (re-initialised at each segment's start,
+    which stops it at the segment's end); the outputs come from CVODE's own interpolation in normal
+    mode, so it never stops at them. The wall clock is read between output times (at most
+    :attr:`MAX_STEPS` steps apart).
     """
 
     MAX_STEPS = 20_000
@@ -255,9 +256,11 @@ class CvodeSolver:
         self.wall_limit = wall_limit
         self._settings = (rtol * CVODE_TOLERANCE_SCALE, atol * CVODE_TOLERANCE_SCALE, max_step)
         self._cvode: sundials.Cvode | None = None
+        self._model: SegmentModel | None = None
 
     def integrate(self, model, y0, t0, t1, t_out, states_out, deadline):
-        if self._cvode is None:
+        if self._cvode is None or model is not self._model:  # CVODE holds the model's callbacks
+            self._model = model
             rtol, atol, max_step = self._settings
             self._cvode = sundials.Cvode(model.c_callbacks(), atol.size, rtol, atol)
             self._cvode.configure(CVODE_MAX_ORDER, self.MAX_STEPS, self.MIN_STEP, max_step)
