@@ -108,7 +108,10 @@ def library() -> SimpleNamespace:
     for part, prototypes in _PROTOTYPES.items():
         found = sorted(folder.glob(f"libsundials_{part}-*.so*"))
         if not found:
-            raise ImportError(f"libsundials_{part} not found in {folder} (scikit-sundae wheel)")
+            raise ImportError(
+                f"libsundials_{part} not found in {folder}: the cvode solver loads the SUNDIALS "
+                "libraries of scikit-sundae's Linux wheel; elsewhere use the radau solver"
+            )
         handle = ctypes.CDLL(str(found[0]), mode=ctypes.RTLD_GLOBAL)
         for name, (result, arguments) in prototypes.items():
             function = getattr(handle, name)
