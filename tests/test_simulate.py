@@ -57,6 +57,21 @@ def test_full_profile_runs_with_units_and_diagnostics(full_runs, solver):
     assert 0 < run.attrs["n_steps"] < {"radau": 2000, "cvode": 4000}[solver]
 
 
+def test_the_solver_states_come_back_named_with_units(unit):
+    run = simulate(unit, t_end=30.0, solver="cvode", states=True)
+    plain = simulate(unit, t_end=30.0, solver="cvode")
+    layout = unit.cycle_model.layout(unit.discretisation.n_volumes)
+    assert run["states"].dims == ("time", "state") and run.sizes["state"] == layout.size
+    labels = list(run["state"].values)
+    assert labels[layout.start("p_cond")] == "p_cond" and "h_cond[0]" in labels
+    units = dict(zip(labels, run["state_units"].values, strict=True))
+    assert units["p_cond"] == "Pa" and units["h_cond[0]"] == "J/kg" and units["Tw_cond[0]"] == "K"
+    # the condenser pressure output is the state itself; the outputs are unchanged
+    np.testing.assert_array_equal(run["PC"].values, run["states"].sel(state="p_cond").values)
+    for name in plain.data_vars:
+        np.testing.assert_array_equal(run[name].values, plain[name].values)
+
+
 @pytest.mark.parametrize("unit_name", ["split_3p5kw_r410a.toml", "heat_pump_3p5kw_r410a.toml"])
 def test_outputs_alone_equal_those_computed_with_the_diagnostics(unit_name):
     """Without diagnostics the outputs skip the walls' and zones' balances; they stay bit for

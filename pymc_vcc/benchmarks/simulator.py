@@ -14,6 +14,11 @@ Then ``speedup_<solver>`` (Radau's median over the solver's), ``parallel_speedup
 box sweep on all cores over the same sweep on one; meaningful only on an otherwise idle
 machine, so ``load_average`` (1 min, at the start) is reported beside it), and, unsuffixed as
 before, the unit's default solver's figures.
+
+What the model itself costs, with no solver (:func:`_model_costs`): ``model_rhs_us``,
+``model_jacobian_ms`` and ``model_outputs_ms`` (the outputs on the whole grid), and per solver
+``model_share_<solver>``: those costs times the run's right-hand sides and Jacobians, plus the
+outputs, over the run's CPU time. The rest is the solver and Python.
 """
 
 from __future__ import annotations
@@ -27,7 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.callbacks import BoundCycle
+from pymc_vcc.physics.inputs import builtin_inputs, input_segments
+from pymc_vcc.physics.refrigerant import load_refrigerant
+from pymc_vcc.physics.simulate import VCCSimulator, simulate
 from pymc_vcc.physics.solvers import METHODS
 from pymc_vcc.physics.unit import load_unit
 
@@ -84,6 +92,42 @@ def _nominal(solver: str, repeats: int) -> dict[str, float | int]:
     }
 
 
+def _model_costs() -> dict[str, float]:
+    """What the cycle's kernels cost without any solver, over the states of a nominal CVODE
+    run: a right-hand side (µs, mean over the 1061 grid states), a Jacobian (ms, every 20th
+    state) and the outputs on the whole grid (ms), each the median of 5 repeats."""
+    unit = load_unit()
+    run = simulate(unit, t_end=T_WINDOW[1], solver="cvode", states=True)
+    model = unit.cycle_model
+    tables = load_refrigerant(unit.refrigerant).tables
+    c = model.constants(unit, unit.parameters.nominal)
+    states = np.ascontiguousarray(run["states"].values)
+    edges, held = input_segments(builtin_inputs())
+    inputs = held[np.clip(np.searchsorted(edges, run["time"].values, side="right") - 1, 0, None)]
+    cycle = BoundCycle(model, states[0], inputs[0], c, tables)
+    dydt = np.empty(states.shape[1])
+    timings: dict[str, list[float]] = {"rhs": [], "jacobian": [], "outputs": []}
+    for _ in range(5):
+        start = time.perf_counter()
+        for y, u in zip(states, inputs, strict=True):
+            cycle.u[:] = u
+            cycle.rhs(y, dydt)
+        timings["rhs"].append((time.perf_counter() - start) / len(states) * 1e6)
+        start = time.perf_counter()
+        for y, u in zip(states[::20], inputs[::20], strict=True):
+            cycle.u[:] = u
+            cycle.jac(y, dydt)  # f(y) only enters the differences: any vector costs the same
+        timings["jacobian"].append((time.perf_counter() - start) / len(states[::20]) * 1e3)
+        start = time.perf_counter()
+        model.outputs_along(states, inputs, c, tables, False)
+        timings["outputs"].append((time.perf_counter() - start) * 1e3)
+    return {
+        "model_rhs_us": median(timings["rhs"]),
+        "model_jacobian_ms": median(timings["jacobian"]),
+        "model_outputs_ms": median(timings["outputs"]),
+    }
+
+
 def _sweep(solver: str, draws: list[dict[str, float]], workers: int) -> dict[str, float | str]:
     context = multiprocessing.get_context("fork")
     start_line = context.Barrier(workers)
@@ -120,8 +164,16 @@ def run(quick: bool) -> dict[str, float | int | str]:
         per_solver[solver] = figures
         results |= {f"{key}_{solver}": value for key, value in figures.items()}
     reference = per_solver["radau"]["sim_seconds_median"]
+    costs = _model_costs()
+    results |= costs
     for solver, figures in per_solver.items():
         results[f"speedup_{solver}"] = reference / figures["sim_seconds_median"]
+        model_seconds = 1e-3 * (
+            costs["model_rhs_us"] * 1e-3 * float(figures["rhs_evals"])
+            + costs["model_jacobian_ms"] * float(figures["jac_evals"])
+            + costs["model_outputs_ms"]
+        )
+        results[f"model_share_{solver}"] = model_seconds / float(figures["sim_cpu_seconds_median"])
     fastest = min(per_solver, key=lambda name: per_solver[name]["sim_seconds_median"])
     one_core = _sweep(fastest, draws, 1)["sims_per_second"]
     results[f"parallel_speedup_{fastest}"] = per_solver[fastest]["sims_per_second"] / one_core
@@ -139,6 +191,7 @@ SIDE_BY_SIDE = (
     "sims_per_cpu_second",
     "failure_rate",
     "speedup",
+    "model_share",
 )
 """Figures shown as one row per figure and one column per solver."""
 

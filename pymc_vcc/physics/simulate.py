@@ -69,6 +69,7 @@ def simulate(
     diagnostics: bool = False,
     max_wall_time: float | None = None,
     solver: str | None = None,
+    states: bool = False,
 ) -> xr.Dataset:
     """Simulate the cycle and return the nine outputs on a regular time grid.
 
@@ -96,6 +97,10 @@ def simulate(
     solver
         ``"radau"`` (scipy, the reference) or ``"cvode"`` (SUNDIALS, faster) (default: the
         unit's ``solver.method``), see :mod:`pymc_vcc.physics.solvers`.
+    states
+        Also return the solver's state on the grid: ``states`` over (``time``, ``state``), the
+        state variables named by the cycle's layout (coordinate ``state``: ``p_cond``,
+        ``h_cond[0]``, ...) with their SI units (coordinate ``state_units``).
 
     Returns
     -------
@@ -128,7 +133,7 @@ def simulate(
     c = model.constants(unit, theta, controller)
     atol = layout.tolerances(unit.solver)
 
-    states = np.full((times.size, layout.size), np.nan)
+    on_grid = np.full((times.size, layout.size), np.nan)
     controls = np.empty((times.size, len(CYCLE_INPUT_IDS)))
     segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
     controls[:] = held[segment_of]
@@ -142,15 +147,15 @@ def simulate(
     if y is not None:
         with _THREADPOOLS.limit(limits=1, user_api="blas"):
             failure = _integrate(
-                model, y, c, tables, edges, held, times, states, stepper, started + limit
+                model, y, c, tables, edges, held, times, on_grid, stepper, started + limit
             )
 
     values = _empty_result(model, times, diagnostics)
-    done = np.isfinite(states).all(axis=1)
+    done = np.isfinite(on_grid).all(axis=1)
     charge = model.charge(c)
     if done.any():
         evaluated = np.full((times.size, model.n_eval), np.nan)
-        evaluated[done] = model.outputs_along(states[done], controls[done], c, tables, diagnostics)
+        evaluated[done] = model.outputs_along(on_grid[done], controls[done], c, tables, diagnostics)
         for k, name in enumerate(values):
             values[name] = evaluated[:, k]
         diagnostic = list(model.output_info) + list(model.diagnostic_info)
@@ -186,6 +191,11 @@ def simulate(
             "cycle": model.name,
         },
     )
+    if states:
+        dataset["states"] = (("time", "state"), on_grid, {"long_name": "solver state"})
+        dataset = dataset.assign_coords(
+            state=("state", list(layout.labels)), state_units=("state", list(layout.units))
+        )
     return dataset
 
 

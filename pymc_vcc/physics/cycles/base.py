@@ -45,6 +45,15 @@ class BlockKind(StrEnum):
     INTEGRAL = "integral"  # controller integral, kg s
 
 
+BLOCK_UNITS = {
+    BlockKind.PRESSURE: "Pa",
+    BlockKind.ENTHALPY: "J/kg",
+    BlockKind.TEMPERATURE: "K",
+    BlockKind.INTEGRAL: "kg s",
+}
+"""The SI unit of each kind of state block."""
+
+
 @dataclass(frozen=True)
 class Block:
     """A named, contiguous part of the state vector."""
@@ -109,6 +118,21 @@ class StateLayout:
     def record(self) -> np.void:
         """The offsets as a Numba record: one field per block, ``size`` and ``zones``."""
         return make_record(self.dtype, {**self._start, "size": self.size, "zones": self.zones})
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """One name per state variable: the block's, with the cell index for blocks of more
+        than one (``h_cond[0]``)."""
+        return tuple(
+            block.name if block.size == 1 else f"{block.name}[{i}]"
+            for block in self.blocks
+            for i in range(block.size)
+        )
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """The SI unit of each state variable (:data:`BLOCK_UNITS`)."""
+        return tuple(BLOCK_UNITS[block.kind] for block in self.blocks for _ in range(block.size))
 
     def tolerances(self, solver: SolverSettings) -> np.ndarray:
         """Absolute tolerances of the state, by block kind, from the unit's solver settings."""
