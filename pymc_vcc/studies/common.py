@@ -200,11 +200,12 @@ class StudySettings:
         with make_executor(self.executor, self.n_workers, address=self.scheduler) as executor:
             yield executor
 
-    def checkpoint(self, name: str) -> Path | None:
-        """Checkpoint file ``<out>/checkpoints/<name>.sqlite``; removed first unless resuming."""
+    def checkpoint(self, name: str, suffix: str = ".sqlite") -> Path | None:
+        """Checkpoint file ``<out>/checkpoints/<name><suffix>``; removed first unless
+        resuming."""
         if self.out is None:
             return None
-        path = self.out / "checkpoints" / f"{name}.sqlite"
+        path = self.out / "checkpoints" / f"{name}{suffix}"
         path.parent.mkdir(parents=True, exist_ok=True)
         if not self.resume:
             path.unlink(missing_ok=True)

@@ -34,6 +34,7 @@ from pymc_vcc.inference.distances import BATCH_DISTANCES, BatchDistance, ks_dist
 from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
+from pymc_vcc.inference.pymc.laplace import fit_reference
 from pymc_vcc.inference.pymc.smc import check_kernel, check_max_steps, sample_smc_abc
 from pymc_vcc.inference.samplers import SAMPLERS, SmcKernel
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
@@ -242,6 +243,13 @@ def smc_sequential_calibration(
                 sensor_noise=sensor_noise,
                 distance=distance,
             )
+            reference = None
+            if likelihood:  # tempering from the prior takes too many stages in 26 dimensions
+                reference = fit_reference(
+                    executor=executor,
+                    seed=sampler_seed,
+                    checkpoint=settings.checkpoint(f"estimate_fit_{k}", ".json"),
+                )
             tree = sample_smc_abc(
                 draws,
                 executor=executor,
@@ -249,8 +257,12 @@ def smc_sequential_calibration(
                 checkpoint=settings.checkpoint(f"estimate_smc_{k}"),
                 max_steps=max_steps,
                 kernel=kernel,
+                reference=reference,
                 progressbar=bool(settings.progress),
             )
+        tree["sample_stats"].attrs["n_fit_simulations"] = (
+            0 if reference is None else reference.simulations
+        )
         draws_of_prior = prior.sample(draws, np.random.default_rng(prior_seed))
         tree["prior"] = xr.DataTree(
             xr.Dataset(
@@ -394,7 +406,11 @@ def estimation_study(
         covered=[
             _covered(tree, truth) for tree, truth in zip(calibration.trees, truths, strict=True)
         ],
-        simulations=[int(tree["sample_stats"]["n_simulations"]) for tree in calibration.trees],
+        simulations=[
+            int(tree["sample_stats"]["n_simulations"])
+            + tree["sample_stats"].attrs.get("n_fit_simulations", 0)
+            for tree in calibration.trees
+        ],
         wall_seconds=time.perf_counter() - started,
         inert_parameters=unit.cycle_model.inert_parameters,
     )

@@ -53,7 +53,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import pymc as pm
@@ -82,6 +82,9 @@ from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import DistanceKernel, SimulatorFunction
 from pymc_vcc.inference.samplers import SMC_KERNELS, SmcKernel
 
+if TYPE_CHECKING:
+    from pymc_vcc.inference.pymc.laplace import GaussianReference
+
 logger = logging.getLogger(__name__)
 
 _MAX_REASONS = 5
@@ -102,7 +105,7 @@ def _generic_outcome(function: Callable[..., Any], rng, params, size) -> Simulat
     return SimulationOutcome(values, OK, "", elapsed)
 
 
-def _simulate(functions: Sequence[Callable[..., Any]], task: tuple) -> SimulationOutcome:
+def simulate_task(functions: Sequence[Callable[..., Any]], task: tuple) -> SimulationOutcome:
     """Worker side: one simulation of one ``pm.Simulator`` node, with its own random stream."""
     node, seed, size, params = task
     function = functions[node]
@@ -112,7 +115,7 @@ def _simulate(functions: Sequence[Callable[..., Any]], task: tuple) -> Simulatio
     return _generic_outcome(function, rng, params, None if size is None else tuple(size))
 
 
-class _BatchLikelihood:
+class BatchLikelihood:
     """The model's likelihood with its ``pm.Simulator`` nodes evaluated outside PyTensor.
 
     Compiles two functions of the flat particle vector (in the order of ``value_vars``): the
@@ -255,6 +258,10 @@ class ParallelKernel:
         max_steps: at most this many mutation steps per stage (default: PyMC's rule alone,
             stepping until the particles' correlation with the stage's start stops falling,
             which in many dimensions with low acceptance takes dozens of steps).
+        reference: temper from this Gaussian over the value space instead of the prior
+            (:mod:`pymc_vcc.inference.pymc.laplace`): the initial particles are its draws, and
+            the tempering term is prior + likelihood − reference, so that β = 1 is still the
+            posterior.
         **kwargs: the stock kernel's arguments (``draws``, ``model``, ``threshold``, ...).
     """
 
@@ -265,9 +272,11 @@ class ParallelKernel:
         checkpoint: LikelihoodStore | None = None,
         correlation_threshold=0.01,
         max_steps: int | None = None,
+        reference: GaussianReference | None = None,
         **kwargs,
     ) -> None:
         self.max_steps = check_max_steps(max_steps)
+        self.reference = reference
         compile_kwargs = dict(kwargs.get("compile_kwargs") or {})
         super().__init__(*args, correlation_threshold=correlation_threshold, **kwargs)
         if executor is not None and not isinstance(executor, Executor):
@@ -279,7 +288,7 @@ class ParallelKernel:
         self.executor: Executor = SerialExecutor() if executor is None else executor
         self.checkpoint = checkpoint
         self._finished: dict[str, LikelihoodRecord] = {}
-        self._likelihood = _BatchLikelihood(
+        self._likelihood = BatchLikelihood(
             modelcontext(kwargs.get("model")), self.variables, compile_kwargs
         )
         self._seeds = np.random.SeedSequence()
@@ -343,7 +352,7 @@ class ParallelKernel:
         records: list[LikelihoodRecord | None] = [self._finished.get(key) for key in keys]
         todo = [number for number, record in enumerate(records) if record is None]
         chunks = self.executor.imap_chunks(
-            partial(_simulate, self._likelihood.functions),
+            partial(simulate_task, self._likelihood.functions),
             (tasks[number] for number in todo),
             time_limit=self._likelihood.time_limit,
         )
@@ -384,18 +393,36 @@ class ParallelKernel:
         )
         return loglik
 
+    def _tempering_terms(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The two terms of the tempered target ``base + β · increment`` at ``points``: the
+        prior and the simulated log-likelihood, or with a :attr:`reference` its log density and
+        prior + likelihood − reference."""
+        prior_logp = np.array([self.prior_logp_func(point) for point in points]).reshape(-1)
+        loglik = self._simulated_loglik(points, prior_logp)
+        if self.reference is None:
+            return prior_logp, loglik
+        base = self.reference.logpdf(points)
+        return base, prior_logp + loglik - base
+
     def _initialize_kernel(self) -> None:
-        """Initial particles (prior draws or ``start``) with their prior and likelihood."""
-        population = self.start if self.start else self.initialize_population()
-        particles = [
-            DictToArrayBijection.map({v.name: population[v.name][i] for v in self.variables}).data
-            for i in range(self.draws)
-        ]
-        self.tempered_posterior = np.array(floatX(particles))
-        self.prior_logp = np.array(
-            [self.prior_logp_func(particle) for particle in self.tempered_posterior]
-        ).reshape(-1)
-        self.likelihood_logp = self._simulated_loglik(self.tempered_posterior, self.prior_logp)
+        """Initial particles (draws of the prior or of the reference, or ``start``) with the
+        terms of their tempered target."""
+        if self.start:
+            population = self.start
+        elif self.reference is not None:
+            self.tempered_posterior = np.array(floatX(self.reference.sample(self.draws, self.rng)))
+            population = None
+        else:
+            population = self.initialize_population()
+        if population is not None:
+            particles = [
+                DictToArrayBijection.map(
+                    {v.name: population[v.name][i] for v in self.variables}
+                ).data
+                for i in range(self.draws)
+            ]
+            self.tempered_posterior = np.array(floatX(particles))
+        self.prior_logp, self.likelihood_logp = self._tempering_terms(self.tempered_posterior)
         if not np.isfinite(self.likelihood_logp).any():
             raise RuntimeError(
                 f"all {self.draws} simulations of the initial population failed or have zero "
@@ -423,8 +450,7 @@ class ParallelKernel:
         while True:
             log_uniform = np.log(self.rng.random(self.draws))
             proposal, forward_logp, backward_logp = self._propose()
-            prior_logp = np.array([self.prior_logp_func(p) for p in proposal]).reshape(-1)
-            loglik = self._simulated_loglik(proposal, prior_logp)
+            prior_logp, loglik = self._tempering_terms(proposal)
             proposal_logp = prior_logp + loglik * self.beta
             accepted = log_uniform < (
                 (proposal_logp + backward_logp) - (self.tempered_posterior_logp + forward_logp)
@@ -461,13 +487,20 @@ class ParallelKernel:
         self._stage_start = now
         return stats
 
+    def _data_loglik(self) -> np.ndarray:
+        """The particles' log-likelihoods (the tempering increment less the reference's part)."""
+        if self.reference is None:
+            return self.likelihood_logp
+        prior_logp = np.array([self.prior_logp_func(p) for p in self.tempered_posterior])
+        return self.likelihood_logp + self.prior_logp - prior_logp.reshape(-1)
+
     def sample_settings(self) -> dict[str, int | float | str]:
         return {
             **super().sample_settings(),
             "kernel": next(name for name, kind in KERNELS.items() if isinstance(self, kind)),
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
             "failure_examples": " | ".join(self.failure_reasons),
-            "median_log_likelihood": float(np.median(self.likelihood_logp)),
+            "median_log_likelihood": float(np.median(self._data_loglik())),
             "max_steps": self.max_steps or 0,  # 0: no cap
             "executor": repr(self.executor),
         }
@@ -528,7 +561,7 @@ KERNELS: dict[str, type[ParallelKernel]] = dict(
 """The parallel kernel of each name in :data:`~pymc_vcc.inference.samplers.SMC_KERNELS`."""
 
 
-def _graph_digest(variables: Sequence) -> str:
+def graph_digest(variables: Sequence) -> str:
     """Digest of the graphs computing ``variables``: their operations and constants."""
     digest = hashlib.sha256()
     for variable in ancestors(variables):
@@ -555,6 +588,7 @@ def _run_settings(
     correlation: float,
     max_steps: int | None,
     kernel: str,
+    reference: GaussianReference | None,
 ) -> dict[str, Any]:
     """What a resumed run must share with the checkpointed one (besides the seed)."""
     nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
@@ -562,22 +596,24 @@ def _run_settings(
     # before they existed still resume
     capped = {} if max_steps is None else {"max_steps": int(max_steps)}
     other_kernel = {} if kernel == "imh" else {"kernel": kernel}
+    start = {} if reference is None else {"reference": reference.digest()}
     return {
         **capped,
         **other_kernel,
+        **start,
         "sampler": "smc_abc",
         "draws": int(draws),
         "chains": int(chains),
         "threshold": float(threshold),
         "correlation_threshold": float(correlation),
         "parameters": [rv.name for rv in model.free_RVs],
-        "prior_digest": _graph_digest(model.free_RVs),
-        "observed_digest": _graph_digest([model.rvs_to_values[rv] for rv in model.observed_RVs]),
+        "prior_digest": graph_digest(model.free_RVs),
+        "observed_digest": graph_digest([model.rvs_to_values[rv] for rv in model.observed_RVs]),
         "epsilon": [
             float(getattr(rv.owner.op.epsilon, "data", rv.owner.op.epsilon)) for rv in nodes
         ],
         "simulator": [_describe(type(rv.owner.op).fn) for rv in nodes],
-        "likelihood_digest": _graph_digest(model.observed_RVs + model.potentials),
+        "likelihood_digest": graph_digest(model.observed_RVs + model.potentials),
     }
 
 
@@ -594,6 +630,7 @@ def sample_smc_abc(
     correlation_threshold: float = 0.01,
     max_steps: int | None = None,
     kernel: SmcKernel = "imh",
+    reference: GaussianReference | None = None,
     progressbar: bool = True,
     **kwargs: Any,
 ) -> DataTree:
@@ -621,6 +658,9 @@ def sample_smc_abc(
         max_steps: at most this many mutation steps per stage (see :class:`ParallelIMH`).
         kernel: the mutation kernel, a name of :data:`KERNELS`: ``"imh"`` (independent
             proposals, PyMC's default) or ``"mh"`` (random-walk steps).
+        reference: temper from this Gaussian instead of the prior (see :class:`ParallelKernel`;
+            :func:`~pymc_vcc.inference.pymc.laplace.fit_reference` makes one for an exact
+            likelihood).
         progressbar: show PyMC's progress bar.
         **kwargs: other ``pm.sample_smc`` arguments (``start``, ``idata_kwargs``, ...).
 
@@ -654,7 +694,7 @@ def sample_smc_abc(
                 f"{random_seed!r}"
             )
         settings = _run_settings(
-            model, draws, chains, threshold, correlation_threshold, max_steps, kernel
+            model, draws, chains, threshold, correlation_threshold, max_steps, kernel, reference
         )
         store = LikelihoodStore(checkpoint, settings, random_seed)
         random_seed = store.entropy
@@ -684,6 +724,7 @@ def sample_smc_abc(
                 threshold=threshold,
                 correlation_threshold=correlation_threshold,
                 max_steps=max_steps,
+                reference=reference,
                 **kwargs,
             )
         return _with_run_summary(standard_layout(tree, model), model)

@@ -1,0 +1,133 @@
+"""The Laplace start of tempered SMC on the exact likelihood (pymc_vcc.inference.pymc.laplace)."""
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import pymc as pm
+import pytest
+
+from pymc_vcc.inference.noise import SensorNoise
+from pymc_vcc.inference.pymc.laplace import GaussianReference, fit_reference
+from pymc_vcc.inference.pymc.likelihood import add_likelihood
+from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.testing import as_dataset
+
+NOISE = SensorNoise(temperature=0.3)
+
+
+@dataclass(frozen=True)
+class Quadratic:
+    """A deterministic temperature TD = a + b·x + c·x² (K) on x = linspace(-1, 1, n_time):
+    under Gaussian noise of sd 0.3 K and a flat prior far wider than the posterior, the
+    posterior is N(β̂, 0.09 (XᵀX)⁻¹) exactly."""
+
+    n_time: int = 200
+    parameter_names: ClassVar[tuple[str, ...]] = ("a", "b", "c")
+    output_names: ClassVar[tuple[str, ...]] = ("TD",)
+    bounds: ClassVar[dict[str, tuple[float, float]]] = {
+        "a": (280.0, 320.0),
+        "b": (-20.0, 20.0),
+        "c": (-20.0, 20.0),
+    }
+
+    @property
+    def design(self) -> np.ndarray:
+        x = np.linspace(-1.0, 1.0, self.n_time)
+        return np.column_stack([np.ones_like(x), x, x**2])
+
+    def __call__(self, theta, rng) -> np.ndarray:
+        return (self.design @ np.array([theta[n] for n in self.parameter_names]))[np.newaxis]
+
+    def observed(self, truth: np.ndarray, seed: int):
+        data = as_dataset((self.design @ truth)[np.newaxis], self.output_names)
+        data["TD"].attrs["units"] = "K"
+        return NOISE.measure(data, np.random.default_rng(seed))
+
+    def exact_posterior(self, observed) -> tuple[np.ndarray, np.ndarray]:
+        design = self.design
+        precision = design.T @ design / NOISE.temperature**2
+        mean = np.linalg.solve(design.T @ design, design.T @ observed["TD"].values)
+        return mean, np.linalg.inv(precision)
+
+
+PROBLEM = Quadratic()
+TRUTH = np.array([300.0, 3.0, -2.0])
+
+
+def test_gaussian_reference_matches_scipy():
+    from scipy import stats
+
+    rng = np.random.default_rng(0)
+    mean, factor = rng.normal(size=3), rng.normal(size=(3, 3))
+    covariance = factor @ factor.T + np.eye(3)
+    reference = GaussianReference(mean, covariance)
+    points = rng.normal(size=(5, 3))
+    expected = stats.multivariate_normal(mean, covariance).logpdf(points)
+    np.testing.assert_allclose(reference.logpdf(points), expected, rtol=1e-12)
+    draws = reference.sample(20000, rng)
+    np.testing.assert_allclose(np.cov(draws.T), covariance, atol=0.1 * covariance.max())
+    with pytest.raises(ValueError, match="3 x 3"):
+        GaussianReference(mean, np.eye(2))
+    with pytest.raises(np.linalg.LinAlgError):
+        GaussianReference(mean, -np.eye(3))
+
+
+def test_smc_from_the_fit_gives_the_exact_posterior_with_fewer_simulations(quiet_pymc, tmp_path):
+    observed = PROBLEM.observed(TRUTH, seed=4)
+    mean, covariance = PROBLEM.exact_posterior(observed)
+    runs = {}
+    for start in ("prior", "fit"):
+        with pm.Model():
+            add_likelihood("y", PROBLEM, observed, sensor_noise=NOISE)
+            reference = None
+            if start == "fit":
+                reference = fit_reference(executor="serial", checkpoint=tmp_path / "fit.json")
+            tree = sample_smc_abc(
+                600, executor="serial", random_seed=1, reference=reference, progressbar=False
+            )
+        draws = np.column_stack(
+            [tree["posterior"][n].values.ravel() for n in PROBLEM.parameter_names]
+        )
+        fitted = 0 if reference is None else reference.simulations
+        runs[start] = (draws, int(tree["sample_stats"]["n_simulations"]) + fitted, reference)
+    sd = np.sqrt(np.diag(covariance))
+    for start, (draws, _, _) in runs.items():
+        offsets = (draws.mean(axis=0) - mean) / sd
+        ratios = draws.std(axis=0) / sd
+        print(start, offsets, ratios, runs[start][1])
+        assert np.all(np.abs(offsets) < 0.15), (start, offsets)
+        assert np.all(np.abs(ratios - 1) < 0.12), (start, ratios)
+    reference = runs["fit"][2]
+    assert reference.failed_simulations == 0
+    # the reference is the Laplace approximation in logit coordinates: close to the posterior
+    assert reference.cost == pytest.approx(
+        0.5 * np.sum(((observed["TD"].values - PROBLEM.design @ mean) / 0.3) ** 2), rel=1e-3
+    )
+    assert runs["fit"][1] < 0.5 * runs["prior"][1], {k: v[1] for k, v in runs.items()}
+
+
+def test_a_saved_fit_is_reused_only_for_the_same_data(quiet_pymc, tmp_path):
+    path = tmp_path / "fit.json"
+    fits = []
+    for seed in (4, 4, 5):
+        with pm.Model():
+            add_likelihood("y", PROBLEM, PROBLEM.observed(TRUTH, seed), sensor_noise=NOISE)
+            fits.append(fit_reference(executor="serial", checkpoint=path))
+    assert fits[1].digest() == fits[0].digest() and fits[1].simulations == fits[0].simulations
+    assert fits[2].digest() != fits[0].digest()
+
+
+def test_abc_nodes_and_bad_settings_are_refused(quiet_pymc):
+    observed = PROBLEM.observed(TRUTH, seed=4)
+    with pm.Model():
+        add_simulator("y", PROBLEM, observed, epsilon=0.1)
+        with pytest.raises(ValueError, match="exact-likelihood nodes only"):
+            fit_reference(executor="serial")
+    with pm.Model():
+        add_likelihood("y", PROBLEM, observed, sensor_noise=NOISE)
+        with pytest.raises(ValueError, match="inflation must be >= 1"):
+            fit_reference(executor="serial", inflation=0.5)
+        with pytest.raises(ValueError, match="max_simulations must allow"):
+            fit_reference(executor="serial", max_simulations=5)
