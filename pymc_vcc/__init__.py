@@ -38,6 +38,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.inference.noise": ("SensorNoise",),
     "pymc_vcc.inference.likelihood": ("log_likelihood",),
     "pymc_vcc.inference.pymc.likelihood": ("add_likelihood",),
+    "pymc_vcc.inference.pymc.laplace": ("fit_reference", "GaussianReference"),
     "pymc_vcc.inference.priors": ("Prior", "UniformPrior", "GMMPrior", "load_prior"),
     "pymc_vcc.inference.rejection": ("abc_rejection", "TooManyFailuresError"),
     "pymc_vcc.inference.sequential": ("sequential_calibration", "SequentialResult"),

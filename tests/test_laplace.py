@@ -96,7 +96,6 @@ def test_smc_from_the_fit_gives_the_exact_posterior_with_fewer_simulations(quiet
     for start, (draws, _, _) in runs.items():
         offsets = (draws.mean(axis=0) - mean) / sd
         ratios = draws.std(axis=0) / sd
-        print(start, offsets, ratios, runs[start][1])
         assert np.all(np.abs(offsets) < 0.15), (start, offsets)
         assert np.all(np.abs(ratios - 1) < 0.12), (start, ratios)
     reference = runs["fit"][2]

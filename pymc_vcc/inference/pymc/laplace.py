@@ -6,9 +6,11 @@ the 26 parameters of the split unit under typical sensor noise have log-likeliho
 
 1. :func:`fit_reference` fits the parameters by nonlinear least squares on the whitened
    residuals of every exact-likelihood node (scipy's trust-region reflective
-   ``least_squares``) in the model's value space (the unconstrained coordinates of the prior:
-   the logit of each parameter's place in its box), with forward-difference Jacobians whose
-   simulations run as one parallel batch through an executor;
+   ``least_squares``), over ``place = sigmoid(value)`` in the unit box, ``value`` being the
+   model's value space (the unconstrained coordinates of its free variables; for the box priors
+   here, ``place`` is each parameter's place in its box), with forward-difference Jacobians
+   whose simulations run as one parallel batch through an executor. (In the value space itself
+   the fit strays to the box edges, where the logit flattens every slope, and stalls there.)
 2. the Laplace approximation at the fit, covariance ``inflation² (JᵀJ + P)⁻¹`` with ``P`` the
    prior's negative Hessian there, is the :class:`GaussianReference`;
 3. SMC tempers from that reference ``q`` to the posterior (``sample_smc_abc(reference=q)``):
@@ -38,6 +40,7 @@ from pymc.pytensorf import compile as compile_pytensor
 from pymc.pytensorf import join_nonshared_inputs, make_shared_replacements
 from pytensor.gradient import hessian
 from scipy.optimize import least_squares
+from scipy.special import expit, logit
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
 from pymc_vcc.execution.outcomes import SimulationOutcome, crash_outcome
@@ -210,7 +213,7 @@ def fit_reference(
             :func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`).
         n_workers: workers of an executor opened here (default: every core).
         max_simulations: simulations the fit may run (about dimension + 1 per iteration).
-        step: forward-difference step in value-space units (logits).
+        step: forward-difference step in the unit box (a fraction of a box's width).
         inflation: factor on the Laplace standard deviations (≥ 1: a wider start is safer).
         seed: seeds the simulations' random streams (the likelihood's are deterministic).
         checkpoint: JSON file keeping the finished fit; a later call with the same model, data
@@ -245,36 +248,39 @@ def fit_reference(
                 "check the simulator and the prior"
             )
         failed = np.full(first.size, FAILED_RESIDUAL)
+        lower, upper = expit(-FIT_BOUND), expit(FIT_BOUND)
 
-        def residual(point: np.ndarray) -> np.ndarray:
-            found = residuals.batch(point[np.newaxis])[0]
+        def residual(place: np.ndarray) -> np.ndarray:
+            found = residuals.batch(logit(place)[np.newaxis])[0]
             return failed if found is None else found
 
-        def jacobian(point: np.ndarray) -> np.ndarray:
-            steps = np.where(point + step <= FIT_BOUND, step, -step)
-            shifted = point + np.diag(steps)
-            base = residual(point)
+        def jacobian(place: np.ndarray) -> np.ndarray:
+            steps = np.where(place + step <= upper, step, -step)
+            base = residual(place)
+            moved = residuals.batch(logit(place + np.diag(steps)))
             columns = [
-                np.zeros_like(base) if moved is None else (moved - base) / h
-                for moved, h in zip(residuals.batch(shifted), steps, strict=True)
+                np.zeros_like(base) if shifted is None else (shifted - base) / h
+                for shifted, h in zip(moved, steps, strict=True)
             ]
             return np.column_stack(columns)
 
         fit = least_squares(
             residual,
-            np.clip(start.data, -FIT_BOUND, FIT_BOUND),
+            expit(np.clip(start.data, -FIT_BOUND, FIT_BOUND)),
             jac=jacobian,
-            bounds=(-FIT_BOUND, FIT_BOUND),
+            bounds=(lower, upper),
             method="trf",
             x_scale="jac",
             max_nfev=max(2, max_simulations // (dimension + 1)),
         )
-    precision = fit.jac.T @ fit.jac + _prior_precision(model, fit.x)
+    mean = logit(fit.x)
+    slopes = fit.jac * (fit.x * (1.0 - fit.x))  # ∂w/∂value = ∂w/∂place · ∂place/∂value
+    precision = slopes.T @ slopes + _prior_precision(model, mean)
     values, vectors = np.linalg.eigh(0.5 * (precision + precision.T))
     values = np.maximum(values, 1e-6 * max(values.max(), 1e-12))
     covariance = inflation**2 * (vectors / values) @ vectors.T
     reference = GaussianReference(
-        mean=fit.x,
+        mean=mean,
         covariance=0.5 * (covariance + covariance.T),
         simulations=residuals.simulations,
         failed_simulations=residuals.failures,
