@@ -68,6 +68,12 @@ def test_gaussian_reference_matches_scipy():
     np.testing.assert_allclose(reference.logpdf(points), expected, rtol=1e-12)
     draws = reference.sample(20000, rng)
     np.testing.assert_allclose(np.cov(draws.T), covariance, atol=0.1 * covariance.max())
+    mixture = GaussianReference([mean, mean + 10], [covariance, np.eye(3)])
+    both = [stats.multivariate_normal(mean, covariance), stats.multivariate_normal(mean + 10)]
+    expected = np.log(0.5 * both[0].pdf(points) + 0.5 * both[1].pdf(points))
+    np.testing.assert_allclose(mixture.logpdf(points), expected, rtol=1e-10)
+    near_second = np.linalg.norm(mixture.sample(4000, rng) - (mean + 10), axis=1) < 5
+    assert 0.47 < near_second.mean() < 0.53
     with pytest.raises(ValueError, match="3 x 3"):
         GaussianReference(mean, np.eye(2))
     with pytest.raises(np.linalg.LinAlgError):
@@ -101,7 +107,7 @@ def test_smc_from_the_fit_gives_the_exact_posterior_with_fewer_simulations(quiet
     reference = runs["fit"][2]
     assert reference.failed_simulations == 0
     # the reference is the Laplace approximation in logit coordinates: close to the posterior
-    assert reference.cost == pytest.approx(
+    assert reference.costs[0] == pytest.approx(
         0.5 * np.sum(((observed["TD"].values - PROBLEM.design @ mean) / 0.3) ** 2), rel=1e-3
     )
     assert runs["fit"][1] < 0.5 * runs["prior"][1], {k: v[1] for k, v in runs.items()}
@@ -130,3 +136,37 @@ def test_abc_nodes_and_bad_settings_are_refused(quiet_pymc):
             fit_reference(executor="serial", inflation=0.5)
         with pytest.raises(ValueError, match="max_simulations must allow"):
             fit_reference(executor="serial", max_simulations=5)
+
+
+@dataclass(frozen=True)
+class SignBlind(Quadratic):
+    """TD = 300 + a²·(1 + x) + b·x: the data tell a only up to its sign, so the posterior has
+    two equal modes at ±a."""
+
+    parameter_names: ClassVar[tuple[str, ...]] = ("a", "b")
+    bounds: ClassVar[dict[str, tuple[float, float]]] = {"a": (-3.0, 3.0), "b": (-5.0, 5.0)}
+
+    def __call__(self, theta, rng) -> np.ndarray:
+        x = np.linspace(-1.0, 1.0, self.n_time)
+        return (300.0 + theta["a"] ** 2 * (1 + x) + theta["b"] * x)[np.newaxis]
+
+    def observed(self, truth: np.ndarray, seed: int):
+        data = as_dataset(self(dict(zip("ab", truth, strict=True)), None), self.output_names)
+        data["TD"].attrs["units"] = "K"
+        return NOISE.measure(data, np.random.default_rng(seed))
+
+
+def test_several_starts_find_both_modes_and_smc_weighs_them(quiet_pymc):
+    problem = SignBlind()
+    observed = problem.observed(np.array([1.5, 1.0]), seed=2)
+    with pm.Model():
+        add_likelihood("y", problem, observed, sensor_noise=NOISE)
+        single = fit_reference(executor="serial")
+        reference = fit_reference(executor="serial", starts=4, seed=1)
+        tree = sample_smc_abc(
+            400, executor="serial", random_seed=2, reference=reference, progressbar=False
+        )
+    assert len(single.means) == 1 and len(reference.means) == 2
+    a = tree["posterior"]["a"].values.ravel()
+    assert 0.35 < np.mean(a > 0) < 0.65
+    assert np.abs(a).mean() == pytest.approx(1.5, abs=0.02)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from functools import cached_property, partial
 from pathlib import Path
@@ -40,7 +41,8 @@ from pymc.pytensorf import compile as compile_pytensor
 from pymc.pytensorf import join_nonshared_inputs, make_shared_replacements
 from pytensor.gradient import hessian
 from scipy.optimize import least_squares
-from scipy.special import expit, logit
+from scipy.special import expit, logit, logsumexp
+from scipy.stats import chi2
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
 from pymc_vcc.execution.outcomes import SimulationOutcome, crash_outcome
@@ -52,63 +54,83 @@ from pymc_vcc.inference.pymc.smc import BatchLikelihood, graph_digest, simulate_
 FIT_BOUND = 10.0
 """Largest |value| of a fitted coordinate: logit 10 is 4.5e-5 of a box's width from its edge."""
 
+AXIS_ROUNDS = 2
+"""Rounds of :func:`_along_axes` after the fit (2 × dimension simulations each)."""
+
+AXIS_REACH = 2.0
+"""How far :func:`_along_axes` probes each principal axis, in its sds."""
+
 FAILED_RESIDUAL = 1e3
 """Whitened residual given to every entry of a failed simulation: the fit steps back from it."""
 
 
 @dataclass(frozen=True)
 class GaussianReference:
-    """A Gaussian over the model's value space (the flat vector of its free variables'
-    unconstrained values, in ``model.value_vars`` order) and what fitting it cost.
+    """An equal-weight mixture of Gaussians over the model's value space (the flat vector of its
+    free variables' unconstrained values, in ``model.value_vars`` order), one per mode found,
+    and what finding them cost.
 
     Attributes:
-        mean, covariance: of the Gaussian.
+        means, covariances: of the components, (K, d) and (K, d, d); one component may be
+            given as (d,) and (d, d).
         simulations, failed_simulations: simulations the fit ran, and how many failed.
-        iterations: the least-squares iterations.
-        cost: ½ Σ w² of the whitened residuals at the fit.
+        iterations: least-squares iterations over all starts.
+        costs: ½ Σ w² of the whitened residuals at each component's fit.
     """
 
-    mean: np.ndarray
-    covariance: np.ndarray
+    means: np.ndarray
+    covariances: np.ndarray
     simulations: int = 0
     failed_simulations: int = 0
     iterations: int = 0
-    cost: float = float("nan")
+    costs: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        mean = np.asarray(self.mean, dtype=float).reshape(-1)
-        covariance = np.asarray(self.covariance, dtype=float)
-        if covariance.shape != (mean.size, mean.size) or not np.isfinite(covariance).all():
+        means = np.atleast_2d(np.asarray(self.means, dtype=float))
+        covariances = np.asarray(self.covariances, dtype=float)
+        if covariances.ndim == 2:
+            covariances = covariances[np.newaxis]
+        k, d = means.shape
+        if covariances.shape != (k, d, d) or not np.isfinite(covariances).all():
             raise ValueError(
-                f"covariance must be a finite {mean.size} x {mean.size} matrix for a mean of "
-                f"{mean.size} values, got shape {covariance.shape}"
+                f"covariances must be {k} finite {d} x {d} matrices for {k} mean(s) of {d} "
+                f"values, got shape {covariances.shape}"
             )
-        object.__setattr__(self, "mean", mean)
-        object.__setattr__(self, "covariance", covariance)
-        np.linalg.cholesky(self.covariance)  # positive definite, or LinAlgError here
+        object.__setattr__(self, "means", means)
+        object.__setattr__(self, "covariances", covariances)
+        object.__setattr__(self, "costs", tuple(float(c) for c in self.costs))
+        np.linalg.cholesky(covariances)  # positive definite, or LinAlgError here
 
     @cached_property
-    def _factor(self) -> np.ndarray:
-        return np.linalg.cholesky(self.covariance)
+    def _factors(self) -> np.ndarray:
+        return np.linalg.cholesky(self.covariances)
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """``n`` draws, (n, dimension)."""
-        return self.mean + rng.standard_normal((n, self.mean.size)) @ self._factor.T
+        """``n`` draws, (n, dimension), each component drawn with equal probability."""
+        component = rng.integers(len(self.means), size=n)
+        noise = rng.standard_normal(self.means[component].shape)
+        return self.means[component] + np.einsum("nij,nj->ni", self._factors[component], noise)
 
     def logpdf(self, points: np.ndarray) -> np.ndarray:
         """Log density at each row of ``points``."""
-        whitened = np.linalg.solve(self._factor, (np.atleast_2d(points) - self.mean).T)
-        log_det = 2.0 * np.log(np.diag(self._factor)).sum()
-        return -0.5 * (np.sum(whitened**2, axis=0) + log_det + self.mean.size * np.log(2 * np.pi))
+        points = np.atleast_2d(points)
+        per_component = []
+        for mean, factor in zip(self.means, self._factors, strict=True):
+            whitened = np.linalg.solve(factor, (points - mean).T)
+            log_det = 2.0 * np.log(np.diag(factor)).sum()
+            per_component.append(
+                -0.5 * (np.sum(whitened**2, axis=0) + log_det + mean.size * np.log(2 * np.pi))
+            )
+        return logsumexp(per_component, axis=0) - np.log(len(self.means))
 
     def digest(self) -> str:
         """Digest of the mean and covariance (a checkpoint names the reference it sampled)."""
-        return hashlib.sha256(self.mean.tobytes() + self.covariance.tobytes()).hexdigest()
+        return hashlib.sha256(self.means.tobytes() + self.covariances.tobytes()).hexdigest()
 
     def save(self, path: str | Path, fingerprint: str) -> None:
         """Write as JSON (atomically), with the ``fingerprint`` of the fit that made it."""
         payload = {**asdict(self), "fingerprint": fingerprint}
-        payload["mean"], payload["covariance"] = self.mean.tolist(), self.covariance.tolist()
+        payload["means"], payload["covariances"] = self.means.tolist(), self.covariances.tolist()
         with atomic_path(path) as temporary:
             temporary.write_text(json.dumps(payload))
 
@@ -142,6 +164,7 @@ class _Residuals:
         self.observed = [np.asarray(model.rvs_to_values[rv].data, dtype=float) for rv in nodes]
         self.executor, self.seed = executor, seed
         self.simulations = self.failures = 0
+        self.size = sum(data.size for data in self.observed)  # residuals per point
         self._known: dict[bytes, np.ndarray | None] = {}
 
     def of_node(self, node: int, values: np.ndarray) -> np.ndarray:
@@ -197,14 +220,16 @@ def fit_reference(
     *,
     executor: Executor | ExecutorKind = "processes",
     n_workers: int | None = None,
+    starts: int = 1,
     max_simulations: int = 3000,
     step: float = 1e-2,
     inflation: float = 1.2,
     seed: int = 0,
     checkpoint: str | Path | None = None,
 ) -> GaussianReference:
-    """Fit the model's exact-likelihood nodes by least squares and return the Laplace
-    approximation there, the start of ``sample_smc_abc(reference=...)``.
+    """Fit the model's exact-likelihood nodes by least squares from ``starts`` points and return
+    the Laplace approximation at each distinct mode found, the start of
+    ``sample_smc_abc(reference=...)``.
 
     Args:
         model: a model whose ``pm.Simulator`` nodes all come from
@@ -212,95 +237,177 @@ def fit_reference(
         executor: an open executor (left open) or a kind opened here (see
             :func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`).
         n_workers: workers of an executor opened here (default: every core).
-        max_simulations: simulations the fit may run (about dimension + 1 per iteration).
+        starts: fits, the first from the prior's initial point, the others from uniform
+            places in the middle 80 % of the unit box; fits ending within the 99.9 % ellipsoid
+            of a better one are the same mode.
+        max_simulations: simulations each fit may run (about dimension + 1 per iteration).
         step: forward-difference step in the unit box (a fraction of a box's width).
         inflation: factor on the Laplace standard deviations (≥ 1: a wider start is safer).
-        seed: seeds the simulations' random streams (the likelihood's are deterministic).
+        seed: seeds the other starts and the simulations' random streams.
         checkpoint: JSON file keeping the finished fit; a later call with the same model, data
             and settings loads it instead of fitting again.
 
     Returns:
-        The :class:`GaussianReference`, with the fit's simulations and failures counted.
+        The :class:`GaussianReference`, with the fits' simulations and failures counted.
     """
     if not inflation >= 1.0:
         raise ValueError(f"inflation must be >= 1, got {inflation}")
     if not step > 0:
         raise ValueError(f"step must be positive, got {step}")
+    if isinstance(starts, bool) or int(starts) != starts or starts < 1:
+        raise ValueError(f"starts must be a positive integer, got {starts!r}")
     model = modelcontext(model)
     fingerprint = fit_fingerprint(
-        model, max_simulations=max_simulations, step=step, inflation=inflation, seed=seed
+        model,
+        starts=starts,
+        max_simulations=max_simulations,
+        step=step,
+        inflation=inflation,
+        seed=seed,
     )
     if checkpoint is not None and (saved := GaussianReference.load(checkpoint, fingerprint)):
         return saved
-    start = DictToArrayBijection.map(model.initial_point())
-    dimension = start.data.size
+    origin = DictToArrayBijection.map(model.initial_point()).data
+    dimension = origin.size
     if max_simulations < 2 * (dimension + 1):
         raise ValueError(
             f"max_simulations must allow two iterations of {dimension + 1} simulations, "
             f"got {max_simulations}"
         )
+    rng = np.random.default_rng(seed)
+    places = [expit(np.clip(origin, -FIT_BOUND, FIT_BOUND))]
+    places += [rng.uniform(0.1, 0.9, dimension) for _ in range(starts - 1)]
     with executor_scope(executor, n_workers) as opened:
         residuals = _Residuals(model, opened, np.random.SeedSequence(seed))
-        first = residuals.batch(start.data[np.newaxis])[0]
-        if first is None:
+        if residuals.batch(origin[np.newaxis])[0] is None:
             raise RuntimeError(
                 "the fit's starting point (the prior's initial point) failed to simulate; "
                 "check the simulator and the prior"
             )
-        failed = np.full(first.size, FAILED_RESIDUAL)
-        lower, upper = expit(-FIT_BOUND), expit(FIT_BOUND)
+        log_prior, prior_precision = _prior_functions(model)
 
-        def residual(place: np.ndarray) -> np.ndarray:
-            found = residuals.batch(logit(place)[np.newaxis])[0]
-            return failed if found is None else found
+        def cost(points: np.ndarray) -> np.ndarray:
+            """Negative log posterior (up to a constant) at value-space ``points``; inf where
+            a simulation failed."""
+            found = residuals.batch(points)
+            data = np.array([np.inf if r is None else 0.5 * r @ r for r in found])
+            return data - np.array([log_prior(point) for point in points])
 
-        def jacobian(place: np.ndarray) -> np.ndarray:
-            steps = np.where(place + step <= upper, step, -step)
-            base = residual(place)
-            moved = residuals.batch(logit(place + np.diag(steps)))
-            columns = [
-                np.zeros_like(base) if shifted is None else (shifted - base) / h
-                for shifted, h in zip(moved, steps, strict=True)
-            ]
-            return np.column_stack(columns)
-
-        fit = least_squares(
-            residual,
-            expit(np.clip(start.data, -FIT_BOUND, FIT_BOUND)),
-            jac=jacobian,
-            bounds=(lower, upper),
-            method="trf",
-            x_scale="jac",
-            max_nfev=max(2, max_simulations // (dimension + 1)),
-        )
-    mean = logit(fit.x)
-    slopes = fit.jac * (fit.x * (1.0 - fit.x))  # ∂w/∂value = ∂w/∂place · ∂place/∂value
-    precision = slopes.T @ slopes + _prior_precision(model, mean)
-    values, vectors = np.linalg.eigh(0.5 * (precision + precision.T))
-    values = np.maximum(values, 1e-6 * max(values.max(), 1e-12))
-    covariance = inflation**2 * (vectors / values) @ vectors.T
+        modes, iterations = [], 0
+        for place in places:
+            fit = _least_squares(residuals, place, step, max_simulations)
+            iterations += int(fit.nfev)
+            mean = logit(fit.x)
+            slopes = fit.jac * (fit.x * (1.0 - fit.x))  # ∂w/∂value = ∂w/∂place · ∂place/∂value
+            precision = slopes.T @ slopes + prior_precision(mean)
+            values, vectors = np.linalg.eigh(0.5 * (precision + precision.T))
+            values = np.maximum(values, 1e-6 * max(values.max(), 1e-12))
+            covariance = (vectors / values) @ vectors.T
+            for _ in range(AXIS_ROUNDS):
+                mean, covariance = _along_axes(cost, mean, covariance)
+            modes.append((float(fit.cost), mean, covariance))
+    modes = _distinct(modes)
     reference = GaussianReference(
-        mean=mean,
-        covariance=0.5 * (covariance + covariance.T),
+        means=np.array([mean for _, mean, _ in modes]),
+        covariances=np.array([inflation**2 * covariance for _, _, covariance in modes]),
         simulations=residuals.simulations,
         failed_simulations=residuals.failures,
-        iterations=int(fit.nfev),
-        cost=float(fit.cost),
+        iterations=iterations,
+        costs=tuple(fit_cost for fit_cost, _, _ in modes),
     )
     if checkpoint is not None:
         reference.save(checkpoint, fingerprint)
     return reference
 
 
-def _prior_precision(model: Model, point: np.ndarray) -> np.ndarray:
-    """The prior's negative Hessian in value space at ``point`` (Jacobian terms included)."""
+def _least_squares(residuals: _Residuals, place: np.ndarray, step: float, max_simulations: int):
+    """scipy's trust-region fit of the whitened residuals over the unit box from ``place``,
+    with batched forward-difference Jacobians; a failed simulation's residuals are
+    :data:`FAILED_RESIDUAL`, so the fit steps back from it."""
+    lower, upper = expit(-FIT_BOUND), expit(FIT_BOUND)
+    failed = np.full(residuals.size, FAILED_RESIDUAL)
+
+    def residual(at: np.ndarray) -> np.ndarray:
+        found = residuals.batch(logit(at)[np.newaxis])[0]
+        return failed if found is None else found
+
+    def jacobian(at: np.ndarray) -> np.ndarray:
+        steps = np.where(at + step <= upper, step, -step)
+        base = residual(at)
+        moved = residuals.batch(logit(at + np.diag(steps)))
+        columns = [
+            np.zeros_like(base) if shifted is None else (shifted - base) / h
+            for shifted, h in zip(moved, steps, strict=True)
+        ]
+        return np.column_stack(columns)
+
+    return least_squares(
+        residual,
+        np.clip(place, lower, upper),
+        jac=jacobian,
+        bounds=(lower, upper),
+        method="trf",
+        x_scale="jac",
+        max_nfev=max(2, max_simulations // (place.size + 1)),
+    )
+
+
+def _distinct(modes: list[tuple[float, np.ndarray, np.ndarray]]) -> list:
+    """The modes (cost, mean, covariance), best first, without those whose mean lies inside
+    the 99.9 % ellipsoid of a better one."""
+    kept: list[tuple[float, np.ndarray, np.ndarray]] = []
+    for mode in sorted(modes, key=lambda found: found[0]):
+        _, mean, _ = mode
+        limit = chi2.ppf(0.999, mean.size)
+        if all(
+            (mean - other) @ np.linalg.solve(covariance, mean - other) > limit
+            for _, other, covariance in kept
+        ):
+            kept.append(mode)
+    return kept
+
+
+def _prior_functions(model: Model) -> tuple[Callable, Callable]:
+    """The prior's log density and negative Hessian as functions of a value-space point
+    (Jacobian terms included)."""
     initial = model.initial_point()
     shared = make_shared_replacements(initial, model.value_vars, model)
     [logp], flat = join_nonshared_inputs(
         initial, [model.logp(vars=model.free_RVs)], model.value_vars, shared
     )
+    log_prior = compile_pytensor([flat], logp)
     negative_hessian = compile_pytensor([flat], -hessian(logp, flat))
-    return np.asarray(negative_hessian(point), dtype=float)
+    return (
+        lambda point: float(log_prior(point)),
+        lambda point: np.asarray(negative_hessian(point), dtype=float),
+    )
+
+
+def _along_axes(
+    cost: Callable[[np.ndarray], np.ndarray], mean: np.ndarray, covariance: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance corrected along each principal axis of ``covariance``.
+
+    The finite-difference Jacobian takes small steps, where the solver's own error (a few
+    tenths of a whitened residual in norm) swamps the slope of weakly identified directions and
+    adds precision that is not there. Here the ``cost`` is probed at ±:data:`AXIS_REACH` sds
+    along each axis, where the data change it by about 2: the secant curvature sets that axis's
+    sd (at most 10 times wider or narrower) and the secant slope moves the mean (at most to a
+    probe). An axis whose probes failed or curve downwards keeps its sd.
+    """
+    values, vectors = np.linalg.eigh(covariance)
+    sds = np.sqrt(values)
+    reach = AXIS_REACH * sds
+    steps = (vectors * reach).T  # row k: axis k, reach k long
+    costs = cost(np.vstack([mean, mean + steps, mean - steps]))
+    n = mean.size
+    centre, up, down = costs[0], costs[1 : n + 1], costs[n + 1 :]
+    curvature = (up + down - 2.0 * centre) / reach**2
+    usable = np.isfinite(up) & np.isfinite(down) & (curvature > 0)
+    curvature = np.where(usable, curvature, 1.0 / values)
+    new_sds = np.clip(1.0 / np.sqrt(curvature), sds / 10.0, sds * 10.0)
+    shift = np.where(usable, np.clip(-(up - down) / (2.0 * reach) / curvature, -reach, reach), 0.0)
+    return mean + vectors @ shift, (vectors * new_sds**2) @ vectors.T
 
 
 __all__ = ["GaussianReference", "fit_fingerprint", "fit_reference"]
