@@ -117,6 +117,7 @@ def _estimate(args: argparse.Namespace) -> int:
         distance=args.distance,
         kernel_steps=args.kernel_steps,
         kernel=args.kernel,
+        fit_starts=args.fit_starts,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations "
@@ -388,6 +389,13 @@ def build_parser() -> argparse.ArgumentParser:
         default="imh",
         help="smc and likelihood: mutation kernel, imh (independent proposals from a Gaussian "
         "fitted to the particles, PyMC's default) or mh (random-walk steps) (default imh)",
+    )
+    estimate.add_argument(
+        "--fit-starts",
+        type=int,
+        default=0,
+        help="likelihood: temper from the Laplace approximations of least-squares fits from "
+        "this many starts instead of from the prior (default 0: from the prior)",
     )
     estimate.set_defaults(handler=_estimate)
 

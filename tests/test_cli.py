@@ -95,6 +95,11 @@ def test_noisy_data_options_parse():
     assert (args.sampler, args.sensor_noise, args.references) == ("likelihood", "typical", [1.2])
     assert build_parser().parse_args(["leak", "--sampler", "smc"]).sampler == "smc"
     assert build_parser().parse_args(["estimate", "--sensor-noise", "typical"]).sensor_noise
+    estimate = build_parser().parse_args(
+        ["estimate", "--method", "likelihood", "--fit-starts", "3"]
+    )
+    assert (estimate.method, estimate.fit_starts) == ("likelihood", 3)
+    assert build_parser().parse_args(["estimate"]).fit_starts == 0
     validate = build_parser().parse_args(["validate", "--datasets", "3", "--methods", "ks"])
     assert (validate.datasets, validate.methods, validate.reference) == (3, ["ks"], 1.5)
     assert (validate.particles, validate.reference_table) == (None, False)

@@ -177,7 +177,8 @@ def test_estimate_with_smc_mh_cvode_and_the_windowed_distance(tmp_path, capsys, 
 
 
 def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stage(quiet_pymc):
-    """Dataset 2, calibrated from dataset 1's GMM posterior, has the posterior of both."""
+    """Dataset 2, calibrated from dataset 1's GMM posterior, has the posterior of both (each
+    tempered from its fit's Laplace approximation)."""
     problem = SensorProblem()
     noise = SensorNoise.typical()
     rng = np.random.default_rng(5)
@@ -194,6 +195,7 @@ def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stag
             seed=np.random.SeedSequence(0),
             sensor_noise=noise,
             likelihood=True,
+            fit_starts=1,
         )
     grid = np.linspace(1.2, 1.4, 4001)  # the exact posteriors, on a grid of the flat prior
     log_p = np.zeros_like(grid)
@@ -213,6 +215,8 @@ def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stag
 def test_estimate_refuses_an_unknown_distance_before_any_work(tmp_path):
     with pytest.raises(ValueError, match=r"distance must be one of .*, got 'l2'"):
         estimation_study(StudySettings(budget="smoke", out=tmp_path / "e"), distance="l2")
+    with pytest.raises(ValueError, match="fit_starts applies to method='likelihood' only"):
+        estimation_study(StudySettings(budget="smoke", out=tmp_path / "e"), fit_starts=2)
     assert not (tmp_path / "e" / "checkpoints").exists()
 
 

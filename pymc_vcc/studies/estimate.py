@@ -219,12 +219,16 @@ def smc_sequential_calibration(
     distance: BatchDistance = ks_distances,
     max_steps: int | None = None,
     kernel: SmcKernel = "imh",
+    fit_starts: int = 0,
 ) -> SequentialResult:
     """Algorithm 1 with tempered SMC: each dataset's posterior, fitted by a Gaussian mixture, is
     the next dataset's prior. SMC-ABC on ``distance`` (default the paper's KS), or with
     ``likelihood`` the exact likelihood under ``sensor_noise`` (known scales), with the mutation
     ``kernel`` (see :func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`), at most ``max_steps``
-    steps per stage. Each tree also gets a ``prior`` group of ``draws`` prior draws."""
+    steps per stage; with ``fit_starts`` (and ``likelihood``) the tempering starts from the
+    Laplace approximations of that many least-squares fits
+    (:func:`~pymc_vcc.inference.pymc.laplace.fit_reference`) instead of the prior. Each tree
+    also gets a ``prior`` group of ``draws`` prior draws."""
     trees: list[xr.DataTree] = []
     priors: list[Prior] = []
     for k, (observed, stage_seed) in enumerate(
@@ -244,9 +248,10 @@ def smc_sequential_calibration(
                 distance=distance,
             )
             reference = None
-            if likelihood:  # tempering from the prior takes too many stages in 26 dimensions
+            if likelihood and fit_starts:
                 reference = fit_reference(
                     executor=executor,
+                    starts=fit_starts,
                     seed=sampler_seed,
                     checkpoint=settings.checkpoint(f"estimate_fit_{k}", ".json"),
                 )
@@ -293,6 +298,7 @@ def estimation_study(
     distance: str = "ks",
     kernel_steps: int | None = None,
     kernel: SmcKernel = "imh",
+    fit_starts: int = 0,
 ) -> EstimationResult:
     """Sequential calibration of all 26 parameters on two simulated datasets (Figs. 5 to 8).
 
@@ -317,6 +323,8 @@ def estimation_study(
             stage (default: until the particles decorrelate, PyMC's rule).
         kernel: ``"smc"`` and ``"likelihood"``: the mutation kernel, ``"imh"`` (independent
             proposals, PyMC's default) or ``"mh"`` (random-walk steps).
+        fit_starts: ``"likelihood"``: temper from the Laplace approximations of least-squares
+            fits from this many starts instead of from the prior (0: from the prior).
     """
     if method not in SAMPLERS:
         raise ValueError(f"method must be one of {list(SAMPLERS)}, got {method!r}")
@@ -324,7 +332,14 @@ def estimation_study(
         raise ValueError(f"distance must be one of {list(BATCH_DISTANCES)}, got {distance!r}")
     check_max_steps(kernel_steps, "kernel_steps")
     check_kernel(kernel)
+    if isinstance(fit_starts, bool) or int(fit_starts) != fit_starts or fit_starts < 0:
+        raise ValueError(f"fit_starts must be a non-negative integer, got {fit_starts!r}")
     likelihood = method == "likelihood"
+    if fit_starts and not likelihood:
+        raise ValueError(
+            f"fit_starts applies to method='likelihood' only (the fit needs its residuals), "
+            f"got method={method!r}"
+        )
     if likelihood and sensor_noise is None:
         raise ValueError(
             "method='likelihood' needs a sensor_noise (the likelihood of noise-free data is "
@@ -367,6 +382,7 @@ def estimation_study(
                 distance=BATCH_DISTANCES[distance],
                 max_steps=kernel_steps,
                 kernel=kernel,
+                fit_starts=fit_starts,
             )
         else:
             calibration = sequential_calibration(
