@@ -55,7 +55,7 @@ import socket
 import time
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from concurrent import futures
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -189,7 +189,7 @@ class Executor(ABC):
         chunksize: int | None = None,
         batched: bool = False,
         time_limit: float | None = None,
-    ) -> Iterator[list[tuple[int, Any]]]:
+    ) -> Generator[list[tuple[int, Any]], None, None]:
         """Like :meth:`imap_unordered`, but yield each finished chunk as one list of results.
 
         Lets a caller act once per chunk (e.g. persist a checkpoint) rather than per item.

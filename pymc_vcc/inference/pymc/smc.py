@@ -258,7 +258,7 @@ class ParallelKernel:
         max_steps: at most this many mutation steps per stage (default: PyMC's rule alone,
             stepping until the particles' correlation with the stage's start stops falling,
             which in many dimensions with low acceptance takes dozens of steps).
-        reference: temper from this Gaussian over the value space instead of the prior
+        reference: temper from this Gaussian mixture over the value space instead of the prior
             (:mod:`pymc_vcc.inference.pymc.laplace`): the initial particles are its draws, and
             the tempering term is prior + likelihood − reference, so that β = 1 is still the
             posterior.
@@ -658,9 +658,9 @@ def sample_smc_abc(
         max_steps: at most this many mutation steps per stage (see :class:`ParallelIMH`).
         kernel: the mutation kernel, a name of :data:`KERNELS`: ``"imh"`` (independent
             proposals, PyMC's default) or ``"mh"`` (random-walk steps).
-        reference: temper from this Gaussian instead of the prior (see :class:`ParallelKernel`;
-            :func:`~pymc_vcc.inference.pymc.laplace.fit_reference` makes one for an exact
-            likelihood).
+        reference: temper from this Gaussian mixture instead of the prior (see
+            :class:`ParallelKernel`; :func:`~pymc_vcc.inference.pymc.laplace.fit_reference`
+            makes one for an exact likelihood).
         progressbar: show PyMC's progress bar.
         **kwargs: other ``pm.sample_smc`` arguments (``start``, ``idata_kwargs``, ...).
 
