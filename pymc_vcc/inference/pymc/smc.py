@@ -407,21 +407,17 @@ class ParallelKernel:
     def _initialize_kernel(self) -> None:
         """Initial particles (draws of the prior or of the reference, or ``start``) with the
         terms of their tempered target."""
-        if self.start:
-            population = self.start
-        elif self.reference is not None:
-            self.tempered_posterior = np.array(floatX(self.reference.sample(self.draws, self.rng)))
-            population = None
+        if self.reference is not None and not self.start:
+            particles = self.reference.sample(self.draws, self.rng)
         else:
-            population = self.initialize_population()
-        if population is not None:
+            population = self.start or self.initialize_population()
             particles = [
                 DictToArrayBijection.map(
                     {v.name: population[v.name][i] for v in self.variables}
                 ).data
                 for i in range(self.draws)
             ]
-            self.tempered_posterior = np.array(floatX(particles))
+        self.tempered_posterior = np.array(floatX(particles))
         self.prior_logp, self.likelihood_logp = self._tempering_terms(self.tempered_posterior)
         if not np.isfinite(self.likelihood_logp).any():
             raise RuntimeError(
