@@ -206,7 +206,7 @@ class _Residuals:
                         [self.of_node(node, np.asarray(o.values)) for node, o in enumerate(done)]
                     )
                 else:
-                    self.failures += 1
+                    self.failures += n_nodes - len(done)
                     self._known[key] = None
         return [self._known[bytes(point)] for point in points]
 
