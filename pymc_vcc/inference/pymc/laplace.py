@@ -211,7 +211,7 @@ class _Residuals:
         return [self._known[bytes(point)] for point in points]
 
 
-def fit_fingerprint(model: Model | None = None, **settings: Any) -> str:
+def _fingerprint(model: Model | None = None, **settings: Any) -> str:
     """What a saved fit must share with a new one: the model's prior and data, and
     ``settings``."""
     model = modelcontext(model)
@@ -263,7 +263,7 @@ def fit_reference(
     if isinstance(starts, bool) or int(starts) != starts or starts < 1:
         raise ValueError(f"starts must be a positive integer, got {starts!r}")
     model = modelcontext(model)
-    fingerprint = fit_fingerprint(
+    fingerprint = _fingerprint(
         model,
         starts=starts,
         max_simulations=max_simulations,
@@ -303,12 +303,7 @@ def fit_reference(
         for place in places:
             fit = _least_squares(residuals, place, step, max_simulations)
             iterations += int(fit.nfev)
-            mean = logit(fit.x)
-            slopes = fit.jac * (fit.x * (1.0 - fit.x))  # ∂w/∂value = ∂w/∂place · ∂place/∂value
-            precision = slopes.T @ slopes + prior_precision(mean)
-            values, vectors = np.linalg.eigh(0.5 * (precision + precision.T))
-            values = np.maximum(values, 1e-6 * max(values.max(), 1e-12))
-            covariance = (vectors / values) @ vectors.T
+            mean, covariance = _laplace(fit, prior_precision)
             for _ in range(AXIS_ROUNDS):
                 mean, covariance = _along_axes(cost, mean, covariance)
             modes.append((float(fit.cost), mean, covariance))
@@ -356,6 +351,17 @@ def _least_squares(residuals: _Residuals, place: np.ndarray, step: float, max_si
         x_scale="jac",
         max_nfev=max(2, max_simulations // (place.size + 1)),
     )
+
+
+def _laplace(fit, prior_precision: Callable) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance in value space of the Laplace approximation at a least-squares
+    ``fit`` over the unit box (its Jacobian carried over by the chain rule)."""
+    mean = logit(fit.x)
+    slopes = fit.jac * (fit.x * (1.0 - fit.x))  # ∂w/∂value = ∂w/∂place · ∂place/∂value
+    precision = slopes.T @ slopes + prior_precision(mean)
+    values, vectors = np.linalg.eigh(0.5 * (precision + precision.T))
+    values = np.maximum(values, 1e-6 * max(values.max(), 1e-12))
+    return mean, (vectors / values) @ vectors.T
 
 
 def _distinct(modes: list[tuple[float, np.ndarray, np.ndarray]]) -> list:
@@ -416,4 +422,4 @@ def _along_axes(
     return mean + vectors @ shift, (vectors * new_sds**2) @ vectors.T
 
 
-__all__ = ["GaussianReference", "fit_fingerprint", "fit_reference"]
+__all__ = ["GaussianReference", "fit_reference"]
