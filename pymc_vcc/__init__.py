@@ -48,6 +48,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.inference.pymc.smc": ("sample_smc_abc", "ParallelIMH"),
     "pymc_vcc.inference.predictive": ("simulate_predictive", "predictive_bands"),
     "pymc_vcc.inference.sensitivity": ("sobol_indices",),
+    "pymc_vcc.inference.identifiability": ("identifiability", "Identifiability"),
     "pymc_vcc.studies": (
         "StudySettings",
         "leak_study",
