@@ -25,13 +25,13 @@ def _settings(args: argparse.Namespace):
     from pymc_vcc.studies import StudySettings
 
     return StudySettings(
-        budget=args.budget,
+        budget=getattr(args, "budget", "small"),
         executor=args.executor,
         scheduler=args.scheduler,
         n_workers=args.workers,
         out=Path(args.out),
-        resume=args.resume,
-        seed=args.seed,
+        resume=getattr(args, "resume", False),
+        seed=getattr(args, "seed", 0),
         progress=None if not args.json else False,
         time_limit=args.time_limit,
         solver=args.solver,
@@ -159,6 +159,36 @@ def _sobol(args: argparse.Namespace) -> int:
     return _report(args, text, summary)
 
 
+def _identify(args: argparse.Namespace) -> int:
+    from pymc_vcc.studies import identify_study
+
+    result = identify_study(
+        _settings(args),
+        inputs=_inputs(args),
+        parameters=args.parameters,
+        at=dict(args.at or []),
+        t_end=args.t_end,
+        step=args.step,
+    )
+    text = (
+        f"{result.format_table()}\n\n{result.identifiability.simulations} simulations, "
+        f"{result.wall_seconds:.0f} s (sd ratio: expected posterior sd / prior sd for exact-"
+        f"likelihood calibration on the first {result.t_end:g} s under typical sensors)"
+    )
+    return _report(args, text, result.summary())
+
+
+def _assignment(text: str) -> tuple[str, float]:
+    """An argparse type: ``NAME=VALUE`` with a number for VALUE."""
+    name, _, value = text.partition("=")
+    try:
+        return name.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be NAME=VALUE with a number, got {text!r}"
+        ) from None
+
+
 def _bench(args: argparse.Namespace) -> int:
     from pymc_vcc.benchmarks import BENCHMARKS
 
@@ -205,6 +235,17 @@ def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -
         default=budget,
         help="work budget: smoke (seconds), small (minutes), paper (Table I)",
     )
+    _add_run_options(parser, out)
+    parser.add_argument(
+        "--resume", action="store_true", help="continue from the checkpoints in --out"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of every random stream (default 0)"
+    )
+
+
+def _add_run_options(parser: argparse.ArgumentParser, out: str) -> None:
+    """Where simulations run, with which solver, and where the results go."""
     parser.add_argument(
         "--executor",
         choices=list(EXECUTOR_KINDS),
@@ -227,12 +268,6 @@ def _add_study_options(parser: argparse.ArgumentParser, out: str, budget: str) -
     )
     parser.add_argument(
         "--out", default=out, help=f"folder the results are written into (default {out})"
-    )
-    parser.add_argument(
-        "--resume", action="store_true", help="continue from the checkpoints in --out"
-    )
-    parser.add_argument(
-        "--seed", type=int, default=0, help="seed of every random stream (default 0)"
     )
     parser.add_argument(
         "--solver",
@@ -416,6 +451,40 @@ def build_parser() -> argparse.ArgumentParser:
     sobol = commands.add_parser("sobol", help="Sobol sensitivity (Figs. 9 and 10)")
     _add_study_options(sobol, "results/sobol", "small")
     sobol.set_defaults(handler=_sobol)
+
+    identify = commands.add_parser(
+        "identify",
+        help="which parameter combinations noisy data from the profile identify (local Fisher "
+        "information under typical sensors)",
+    )
+    _add_run_options(identify, "results/identify")
+    identify.add_argument(
+        "--parameters", nargs="+", metavar="ID", help="parameters examined (default: all)"
+    )
+    identify.add_argument(
+        "--at",
+        nargs="+",
+        type=_assignment,
+        metavar="ID=VALUE",
+        help="the point, SI units (default: nominal)",
+    )
+    identify.add_argument(
+        "--t-end",
+        type=_positive(float),
+        default=1060.0,
+        metavar="SECONDS",
+        help="calibration window: the first SECONDS of the profile (default 1060)",
+    )
+    identify.add_argument(
+        "--inputs", metavar="CSV", help="input profile (default: the built-in step profile)"
+    )
+    identify.add_argument(
+        "--step",
+        type=_positive(float),
+        default=0.1,
+        help="central-difference half-step, in prior sds (default 0.1)",
+    )
+    identify.set_defaults(handler=_identify)
 
     bench = commands.add_parser("bench", help="speed benchmarks")
     bench.add_argument("--json", action="store_true", help="print one JSON object last")

@@ -141,3 +141,38 @@ def test_split_unit_compressor_losses_trade_off_and_fans_speeds_are_inert():
     assert losses.loadings["CF_POW"] * losses.loadings["CF_PREF"] < 0
     assert abs(losses.loadings["M0"]) < 0.05
     assert found.sd_ratio["M0"] < 0.01
+
+
+def test_identify_command_writes_the_table_and_names_the_unidentified(tmp_path, capsys):
+    import json
+
+    from pymc_vcc.cli import main
+
+    code = main(
+        [
+            "identify",
+            "--parameters", "M0", "CF_POW", "CF_PREF", "FI_SPEED",
+            "--at", "M0=1.4", "FO_FLOW=0.5",
+            "--t-end", "200",
+            "--executor", "serial",
+            "--solver", "cvode",
+            "--out", str(tmp_path),
+            "--json",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["at"]["M0"] == 1.4 and summary["n_simulations"] == 9
+    assert summary["sd_ratio"]["FI_SPEED"] == 1.0 and summary["sd_ratio"]["M0"] < 0.01
+    assert len(summary["not_identified"]) == 2
+    table = (tmp_path / "identifiability.csv").read_text().splitlines()
+    assert table[0] == ",at,prior_sd,sd_ratio,conditional_sd_ratio" and len(table) == 5
+
+
+def test_identify_command_refuses_a_bad_point(capsys):
+    from pymc_vcc.cli import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["identify", "--at", "M0:1.4"])
+    assert exit_info.value.code == 2
+    assert "must be NAME=VALUE with a number, got 'M0:1.4'" in capsys.readouterr().err

@@ -1,0 +1,91 @@
+"""Which parameter combinations noisy data from a test profile identify (``pymc-vcc identify``).
+
+The local Fisher information of the unit's outputs over the calibration window, under typical
+field sensors (:meth:`~pymc_vcc.inference.noise.SensorNoise.typical`), at one point of the
+parameter box: the expected posterior sd / prior sd of each parameter for an exact-likelihood
+calibration on such data, and the combinations the data leave unidentified
+(:mod:`pymc_vcc.inference.identifiability`). No data are needed: it is a question about the
+profile and the sensors.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import xarray as xr
+
+from pymc_vcc.inference.identifiability import Identifiability, identifiability
+from pymc_vcc.inference.noise import SensorNoise
+from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.unit import Unit
+from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
+
+
+@dataclass
+class IdentifyResult:
+    """The local identifiability and how it was found."""
+
+    identifiability: Identifiability
+    t_end: float
+    wall_seconds: float
+    files: list[str] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        """The JSON summary: the point, expected sd ratios, unidentified directions, counts."""
+        found = self.identifiability
+        return {
+            "t_end": self.t_end,
+            "at": found.at,
+            "prior_sd": found.prior_sd,
+            "sd_ratio": found.sd_ratio,
+            "conditional_sd_ratio": found.conditional_sd_ratio,
+            "not_identified": [
+                {"sd_ratio": d.sd_ratio, "loadings": d.loadings} for d in found.not_identified()
+            ],
+            "failed": found.failed,
+            "n_simulations": found.simulations,
+            "wall_seconds": round(self.wall_seconds, 2),
+        }
+
+    def format_table(self) -> str:
+        """The per-parameter table and the unidentified directions, as printed."""
+        return str(self.identifiability)
+
+
+@holds_output_folder("identify")
+def identify_study(
+    settings: StudySettings | None = None,
+    *,
+    unit: Unit | None = None,
+    inputs: xr.Dataset | None = None,
+    parameters: Sequence[str] | None = None,
+    at: Mapping[str, float] | None = None,
+    t_end: float = 1060.0,
+    step: float = 0.1,
+    sensor_noise: SensorNoise | None = None,
+) -> IdentifyResult:
+    """Local identifiability of ``parameters`` (default: all of the unit's) at ``at`` (default:
+    nominal; SI units) from the first ``t_end`` s of ``inputs`` (default: the built-in
+    profile) under ``sensor_noise`` (default: typical)."""
+    started = time.perf_counter()
+    unit = settings.unit(unit)
+    simulator = VCCSimulator(unit, inputs, t_window=(0.0, t_end), parameters=parameters)
+    point = {spec.id: spec.nominal for spec in unit.parameters} | dict(at or {})
+    with settings.open_executor() as executor:
+        found = identifiability(
+            simulator,
+            sensor_noise or SensorNoise.typical(),
+            at=point,
+            step=step,
+            executor=executor,
+            time_limit=settings.time_limit,
+        )
+    result = IdentifyResult(found, float(t_end), time.perf_counter() - started)
+    if settings.out is not None:
+        out = settings.out
+        write_json(out / "summary.json", result.summary())
+        write_text(out / "identifiability.csv", found.to_dataframe().to_csv())
+        result.files = [str(out / "summary.json"), str(out / "identifiability.csv")]
+    return result
