@@ -21,8 +21,10 @@ from pymc_vcc.physics.components.fan import air_inlet_temperature, fan_operating
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
 from pymc_vcc.physics.components.heat_transfer import (
     LIQUID_BLEND,
+    air_effectiveness,
     air_side_heat,
     cell_heat,
+    flow_scale,
     refrigerant_htc,
 )
 from pymc_vcc.physics.components.moist_air import (
@@ -199,7 +201,7 @@ def test_protection_speed_factor():
 
 
 def test_refrigerant_htc_blend():
-    args = (300.0, 3000.0, 800.0, 1.0)
+    args = (300.0, 3000.0, 800.0, flow_scale(1.0))
     assert refrigerant_htc(-0.1, *args) == pytest.approx(300.0, rel=2e-3)
     assert refrigerant_htc(0.6, *args) == pytest.approx(3000.0, rel=2e-3)
     assert refrigerant_htc(1.1, *args) == pytest.approx(800.0, rel=2e-3)
@@ -208,14 +210,17 @@ def test_refrigerant_htc_blend():
     xs = np.linspace(-0.2, 1.2, 2801)
     values = np.array([refrigerant_htc(x, *args) for x in xs])
     assert np.max(np.abs(np.diff(values))) < 3000.0 * 0.01  # continuous
-    half = refrigerant_htc(0.6, 300.0, 3000.0, 800.0, 0.5)
+    half = refrigerant_htc(0.6, 300.0, 3000.0, 800.0, flow_scale(0.5))
     assert half == pytest.approx(3000.0 * math.sqrt(0.25 + 0.0025) ** 0.8)
+    assert flow_scale(0.0) == pytest.approx(0.05**0.8)  # the wall never decouples
 
 
 def test_air_side_heat_limits():
-    assert air_side_heat(500.0, 300.0, 300.0, 60.0, 10.0) == 0.0
-    assert air_side_heat(500.0, 310.0, 300.0, 1e6, 10.0) == pytest.approx(500.0 * 10.0)
-    assert air_side_heat(1e9, 310.0, 300.0, 60.0, 10.0) == pytest.approx(60.0 * 10.0 * 10.0, 1e-6)
+    assert air_side_heat(500.0, 300.0, 300.0, air_effectiveness(500.0, 60.0, 10.0)) == 0.0
+    large = air_effectiveness(500.0, 1e6, 10.0)
+    assert air_side_heat(500.0, 310.0, 300.0, large) == pytest.approx(500.0 * 10.0)
+    small = air_effectiveness(1e9, 60.0, 10.0)
+    assert air_side_heat(1e9, 310.0, 300.0, small) == pytest.approx(60.0 * 10.0 * 10.0, 1e-6)
 
 
 def test_tank_outlet(tables):
@@ -243,7 +248,7 @@ def test_liquid_level_by_the_lever_rule(tables):
 
 
 def test_cell_heat_averages_flux_over_the_cell():
-    htcs = (300.0, 3000.0, 800.0, 1.0)
+    htcs = (300.0, 3000.0, 800.0, flow_scale(1.0))
     # a cell all in one phase at one temperature: α A (T_w - T)
     assert cell_heat(310.0, 2.0, 0.5, 0.6, 300.0, 300.0, 300.0, *htcs) == pytest.approx(
         3000.0 * 2.0 * 10.0, rel=2e-3
@@ -275,19 +280,19 @@ def test_coil_cell_heat_is_exact_across_blends_and_saturation_lines(tables):
     h_in, h_out, T_wall = h_v + 40e3, h_l - 5e3, 300.0
     fine = np.linspace(h_in, h_out, 20001)
     flux = [
-        refrigerant_htc(quality(h), 2000.0, 12000.0, 1000.0, 1.0)
+        refrigerant_htc(quality(h), 2000.0, 12000.0, 1000.0, flow_scale(1.0))
         * (T_wall - state(tables, p, h)[0])
         for h in fine
     ]
     exact = np.trapezoid(flux, fine) / (h_out - h_in)
     ends = [(h, quality(h), state(tables, p, h)[0]) for h in (h_in, h_out)]
     heat = coil_cell_heat(
-        tables, saturation_point(tables, p), p, coil, T_wall, 1.0, *ends[0], *ends[1]
+        tables, saturation_point(tables, p), p, coil, T_wall, flow_scale(1.0), *ends[0], *ends[1]
     )
     assert heat == pytest.approx(exact, rel=1e-4)
     # one Simpson rule over the whole cell is 8 % off (its middle is two-phase)
     T_mid = state(tables, p, 0.5 * (h_in + h_out))[0]
-    htcs = (2000.0, 12000.0, 1000.0, 1.0)
+    htcs = (2000.0, 12000.0, 1000.0, flow_scale(1.0))
     one_rule = cell_heat(T_wall, 1.0, ends[0][1], ends[1][1], ends[0][2], T_mid, ends[1][2], *htcs)
     assert abs(one_rule / exact - 1) > 0.05
     # a cell inside one smooth stretch is the plain rule

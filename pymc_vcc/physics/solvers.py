@@ -241,7 +241,7 @@ class CvodeSolver:
     One CVODE instance serves every segment of a model (re-initialised at each segment's start,
     which stops it at the segment's end); the outputs come from CVODE's own interpolation in normal
     mode, so it never stops at them. The wall clock is read between output times (at most
-    :attr:`MAX_STEPS` steps apart).
+    :attr:`MAX_STEPS` steps apart); the states are checked finite once per segment.
     """
 
     MAX_STEPS = 20_000
@@ -269,19 +269,28 @@ class CvodeSolver:
         ends_on_output = t_out.size > 0 and t_out[-1] == t1
         targets = t_out if ends_on_output else np.append(t_out, t1)
         failure = None
-        for row, target in enumerate(targets):
+        advance, y = cvode.advance, cvode.y
+        reached = 0  # output rows filled
+        for row, target in enumerate(targets.tolist()):
             if time.perf_counter() > deadline:
                 failure = _wall_clock_failure(self.wall_limit, cvode.t)
                 break
-            flag, t = cvode.advance(target)
+            flag, t = advance(target)
             if flag < 0:
                 failure = _failure(t, sundials.flag_name(flag), model.bad_rhs)
                 break
-            if not np.isfinite(cvode.y).all():
-                failure = Failure(FailureKind.NON_FINITE, f"non-finite state at t = {t:.2f} s")
-                break
             if row < t_out.size:
-                states_out[row] = cvode.y
+                states_out[row] = y
+                reached = row + 1
+        finite = np.isfinite(states_out[:reached]).all(axis=1)
+        if not finite.all():  # the first non-finite state ends the run there
+            first = int(np.argmin(finite))
+            states_out[first:] = np.nan
+            failure = Failure(
+                FailureKind.NON_FINITE, f"non-finite state at t = {t_out[first]:.2f} s"
+            )
+        elif failure is None and not np.isfinite(y).all():
+            failure = Failure(FailureKind.NON_FINITE, f"non-finite state at t = {cvode.t:.2f} s")
         n_steps, n_rhs, n_jac = cvode.statistics()
         self.counters.n_steps += n_steps
         self.counters.n_rhs += n_rhs

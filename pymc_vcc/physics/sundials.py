@@ -207,6 +207,7 @@ class Cvode:
         """The current state (CVODE's own vector; copy it to keep it)."""
         self.y[:] = 0.0
         self._vector, self._memory, self._t = y, memory, ctypes.c_double()
+        self._step, self._t_reference = lib.CVode, ctypes.byref(self._t)  # bound once: per output
         for name, *arguments in (
             ("CVodeInit", callbacks.rhs, 0.0, y),
             ("CVodeSVtolerances", rtol, tolerances),
@@ -240,7 +241,7 @@ class Cvode:
     def advance(self, t_out: float) -> tuple[int, float]:
         """Integrate until ``t_out`` (s), interpolated into :attr:`y`; return CVODE's flag
         (negative: failed) and the time reached."""
-        flag = self._lib.CVode(self._memory, t_out, self._vector, ctypes.byref(self._t), CV_NORMAL)
+        flag = self._step(self._memory, t_out, self._vector, self._t_reference, CV_NORMAL)
         return flag, self._t.value
 
     def statistics(self) -> tuple[int, int, int]:

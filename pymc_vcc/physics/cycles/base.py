@@ -241,6 +241,8 @@ def place_charge(
         )
     for _ in range(60):
         mid = 0.5 * (low + high)
+        if mid in (low, high):  # adjacent doubles: nothing is left to halve
+            break
         if mass(fill(mid)) < target:
             low = mid
         else:

@@ -36,7 +36,11 @@ from pymc_vcc.physics.components.compressor import compressor, protection_speed_
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
-from pymc_vcc.physics.components.heat_transfer import air_side_heat
+from pymc_vcc.physics.components.heat_transfer import (
+    air_effectiveness,
+    air_side_heat,
+    flow_scale,
+)
 from pymc_vcc.physics.components.moist_air import humidity_ratio, latent_heat
 from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
 from pymc_vcc.physics.cycles.base import (
@@ -71,7 +75,7 @@ if TYPE_CHECKING:
 N_EVAL = len(OUTPUT_INFO) + len(DIAGNOSTIC_INFO)
 
 MEMO_COLUMNS = 10
-"""A remembered coil cell heat: p, T_wall, flow ratio, h_in, x_in, T_in, h, x, T, then the heat."""
+"""A remembered coil cell heat: p, T_wall, flow scale, h_in, x_in, T_in, h, x, T, then the heat."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -112,30 +116,28 @@ def evaluate(y, u, constants, tables, dydt, out):
 
 
 @njit(cache=True, error_model="numpy")
-def remembered_cell_heat(
-    memo, row, tables, sat, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T
-):
+def remembered_cell_heat(memo, row, tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T):
     """:func:`coil_cell_heat`, taken from row ``row`` of ``memo`` when the row holds these same
     arguments (the coil and tables aside) and worked out afresh otherwise. With ``memo`` None it
     always works it out; a row of NaN matches nothing."""
     if memo is None:
-        return coil_cell_heat(tables, sat, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T)
+        return coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T)
     m = memo[row]
     if (
-        m[0] == p and m[1] == T_wall and m[2] == flow_ratio and m[3] == h_in and m[4] == x_in
+        m[0] == p and m[1] == T_wall and m[2] == scale and m[3] == h_in and m[4] == x_in
         and m[5] == T_in and m[6] == h and m[7] == x and m[8] == T
     ):  # fmt: skip
         return m[9]
-    return coil_cell_heat(tables, sat, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T)
+    return coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T)
 
 
 @njit(cache=True, error_model="numpy")
-def remember_cell_heat(memo, row, p, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T, q):
+def remember_cell_heat(memo, row, p, T_wall, scale, h_in, x_in, T_in, h, x, T, q):
     """Keep heat ``q`` and its arguments in row ``row`` of ``memo`` (None: nothing)."""
     if memo is not None:
         m = memo[row]
         m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9] = (
-            p, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T, q
+            p, T_wall, scale, h_in, x_in, T_in, h, x, T, q
         )  # fmt: skip
 
 
@@ -239,8 +241,10 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
         q_sensible = 0.0
         q_latent = 0.0
         W_ind = humidity_ratio(T_ind, rh_ind)
-        flow_c = abs(m_comp) / cond.nominal_mass_flow
-        flow_e = abs(m_valve) / evap.nominal_mass_flow
+        flow_c = flow_scale(abs(m_comp) / cond.nominal_mass_flow)
+        flow_e = flow_scale(abs(m_valve) / evap.nominal_mass_flow)
+        air_c = air_effectiveness(cond.air_capacity, cond.htc_air, cond.air_area)
+        air_e = air_effectiveness(evap.air_capacity, evap.htc_air, evap.air_area)
         point_c = saturation_point(tables, p_c)
         point_e = saturation_point(tables, p_e)
         # what enters each coil: the discharge gas (or the hot gas line), the liquid line
@@ -262,7 +266,7 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
             )
             if remember:
                 remember_cell_heat(memo, i, p_c, tw, flow_c, h_in, x_in, T_in, h, x, T, q_ref)
-            q_air = air_side_heat(cond.air_capacity, T_air_c, tw, cond.htc_air, cond.air_area)
+            q_air = air_side_heat(cond.air_capacity, T_air_c, tw, air_c)
             dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
             src_c[k] = q_ref
             q_cond -= q_ref
@@ -276,7 +280,7 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
             )
             if remember:
                 remember_cell_heat(memo, n + i, p_e, tw, flow_e, h_in, x_in, T_in, h, x, T, q_ref)
-            q_air = air_side_heat(evap.air_capacity, T_air_e, tw, evap.htc_air, evap.air_area)
+            q_air = air_side_heat(evap.air_capacity, T_air_e, tw, air_e)
             if not heating:  # the indoor coil evaporates: sensible and latent load
                 q_sensible += q_air
                 if rh_ind > 0.0:

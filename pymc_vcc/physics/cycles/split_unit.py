@@ -318,10 +318,11 @@ def flow_through_drops(
 
 
 @njit(cache=True, error_model="numpy")
-def coil_cell_heat(tables, sat, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h, x, T):
+def coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T):
     """Heat from the wall to one coil cell's refrigerant, W: the cell-mean flux, its enthalpy
     running linearly from its inlet (``h_in``, ``x_in``, ``T_in``) to its own state (``h``,
-    ``x``, ``T``) at pressure ``p`` (saturation point ``sat``), by
+    ``x``, ``T``) at pressure ``p`` (saturation point ``sat``) and flow ``scale``
+    (:func:`~pymc_vcc.physics.components.heat_transfer.flow_scale`), by
     :func:`~pymc_vcc.physics.components.heat_transfer.cell_heat` on each stretch between the
     :data:`~pymc_vcc.physics.components.heat_transfer.FLUX_KINKS` it holds, weighted by
     length.
@@ -358,7 +359,7 @@ def coil_cell_heat(tables, sat, p, coil, T_wall, flow_ratio, h_in, x_in, T_in, h
             coil.htc_liquid,
             coil.htc_two_phase,
             coil.htc_vapor,
-            flow_ratio,
+            scale,
         )
         h_a, x_a, T_a = h_b, x_b, T_b
     return total
