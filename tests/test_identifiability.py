@@ -176,3 +176,18 @@ def test_identify_command_refuses_a_bad_point(capsys):
         main(["identify", "--at", "M0:1.4"])
     assert exit_info.value.code == 2
     assert "must be NAME=VALUE with a number, got 'M0:1.4'" in capsys.readouterr().err
+
+
+def test_logging_compressor_power_separates_its_loss_factors():
+    """The electrical power sees CF_POW alone, so with it the losses' direction is informed."""
+    from pymc_vcc.physics.cycles import OUTPUT_IDS
+
+    simulator = VCCSimulator(
+        t_window=(0.0, 300.0),
+        parameters=["M0", "CF_POW", "CF_PREF"],
+        outputs=[*OUTPUT_IDS, "W_comp"],
+        solver="cvode",
+    )
+    found = identifiability(simulator, SensorNoise.typical(), executor="serial")
+    assert not found.not_identified()
+    assert found.sd_ratio["CF_POW"] < 0.05 and found.sd_ratio["CF_PREF"] < 0.5
