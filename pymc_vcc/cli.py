@@ -121,7 +121,8 @@ def _estimate(args: argparse.Namespace) -> int:
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations "
-        f"({' + '.join(map(str, result.simulations))} by dataset), "
+        f"({' + '.join(map(str, result.simulations))} by dataset, and "
+        f"{result.identify_simulations} to find what the data cannot identify), "
         f"{result.wall_seconds:.0f} s (sd ratio: posterior sd / sd of the uniform Table III prior)"
     )
     return _report(args, text, result.summary())

@@ -15,11 +15,11 @@ import xarray as xr
 from pymc_vcc.cli import main
 from pymc_vcc.execution.executors import make_executor
 from pymc_vcc.inference.distances import BATCH_DISTANCES, windowed_distances
+from pymc_vcc.inference.identifiability import Direction
 from pymc_vcc.inference.likelihood import log_likelihood
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.series import prepare_observed
-from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies import StudySettings, estimation_study, leak_study
 from pymc_vcc.studies.estimate import (
     EstimationResult,
@@ -135,6 +135,14 @@ def test_estimate_command_writes_figures_and_reloadable_results(tmp_path, capsys
     assert inside == [sum(flags.values()) for flags in summary["truth_in_95"]]
     assert f"truths inside their 95 % intervals: {inside[0]}/26 and {inside[1]}/26" in table
     assert table.count(" yes") + table.count(" NO") == 2 * 26
+    # the fans' speeds change no output; the losses reach the outputs through one product
+    dominant = [
+        max(d["loadings"], key=lambda k: abs(d["loadings"][k])) for d in summary["unidentified"]
+    ]
+    assert summary["n_identify_simulations"] == 53
+    assert {"FO_SPEED", "FI_SPEED", "CF_PREF"} <= set(dominant)
+    assert len(summary["collapsed"]) == 2
+    assert "to find what the data cannot identify" in table
     folder = out
     for stem in (
         "fig4_inputs",
@@ -220,27 +228,29 @@ def test_estimate_refuses_an_unknown_distance_before_any_work(tmp_path):
     assert not (tmp_path / "e" / "checkpoints").exists()
 
 
-def test_a_narrowed_inert_parameter_flags_collapsed_particles():
-    """FO_SPEED changes no output: a posterior narrower than 0.7 of its prior marks the
-    dataset's particles as collapsed; the split unit names its inert parameters."""
-    assert set(load_unit().cycle_model.inert_parameters) == {"FO_SPEED", "FI_SPEED"}
+def test_a_narrowed_unidentified_direction_flags_collapsed_particles():
+    """No data narrow an unidentified direction beyond what they allow there: a posterior
+    narrower than 0.7 of that marks the dataset's particles as collapsed."""
+    fan = Direction(1.0, {"FO_SPEED": 1.0})
+    losses = Direction(0.8, {"CF_PREF": 0.94, "CF_POW": -0.33})
     result = EstimationResult(
         truths=[],
         calibration=None,
         predictive=[],
         uncalibrated=None,
-        contraction=[
-            {"M0": 0.1, "FO_SPEED": 0.95, "FI_SPEED": 0.65},
-            {"M0": 0.1, "FO_SPEED": 0.9, "FI_SPEED": 0.8},
-        ],
+        contraction=[],
         covered=[],
         simulations=[],
         wall_seconds=0.0,
-        inert_parameters=("FO_SPEED", "FI_SPEED"),
+        unidentified=[fan, losses],
+        sd_along=[[0.95, 0.5], [0.9, 0.6]],
     )
-    assert result.collapsed == [{"FO_SPEED": 0.95, "FI_SPEED": 0.65}, {}]
+    assert result.collapsed == [
+        {"1: +1.00 FO_SPEED": 0.95, "0.8: +0.94 CF_PREF -0.33 CF_POW": 0.5},
+        {},
+    ]
     (line,) = _collapse_warnings(result.collapsed)
-    assert line.startswith("dataset 1:") and "FI_SPEED 0.65" in line
+    assert line.startswith("dataset 1:") and "0.50 along 0.8: +0.94 CF_PREF -0.33 CF_POW" in line
 
 
 def test_estimate_refuses_an_unknown_kernel_before_any_work(tmp_path):

@@ -31,6 +31,7 @@ import xarray as xr
 
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.distances import BATCH_DISTANCES, BatchDistance, ks_distances
+from pymc_vcc.inference.identifiability import Direction, Identifiability, identifiability
 from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
@@ -63,8 +64,9 @@ INTERVAL = 0.95
 """Probability of the central posterior interval checked against the truth."""
 
 COLLAPSE_SD_RATIO = 0.7
-"""Posterior sd over prior sd below which a parameter that changes no output shows collapsed
-particles (with 128 particles the sd of uniform draws scatters by about 6 %)."""
+"""Posterior sd along a direction the data do not identify, over the sd the data allow there
+(:mod:`~pymc_vcc.inference.identifiability`), below which the particles collapsed (with 128
+particles the sd of uniform draws scatters by about 6 %)."""
 
 
 @dataclass
@@ -80,7 +82,10 @@ class EstimationResult:
         covered: whether each truth lies in its central 95 % posterior interval, per dataset.
         simulations: forward simulations the sampler ran, per dataset.
         wall_seconds: wall time of the whole study, s.
-        inert_parameters: the parameters that change no output (the cycle model's).
+        unidentified: the directions typical sensors' data would not identify at dataset 1's
+            truth, each with the sd ratio such data allow along it.
+        sd_along: per dataset, the posterior sd along each of ``unidentified``, in prior sds.
+        identify_simulations: the simulations that found ``unidentified``.
     """
 
     truths: list[dict[str, float]]
@@ -91,7 +96,9 @@ class EstimationResult:
     covered: list[dict[str, bool]]
     simulations: list[int]
     wall_seconds: float
-    inert_parameters: tuple[str, ...] = ()
+    unidentified: list[Direction] = field(default_factory=list)
+    sd_along: list[list[float]] = field(default_factory=list)
+    identify_simulations: int = 0
     files: list[str] = field(default_factory=list)
 
     @property
@@ -101,14 +108,21 @@ class EstimationResult:
 
     @property
     def collapsed(self) -> list[dict[str, float]]:
-        """Per dataset, the sd ratios of the inert parameters if one fell below
-        :data:`COLLAPSE_SD_RATIO` (no data narrows them, so the sampler's particles collapsed
-        and every interval of that dataset is too narrow), else an empty dict."""
+        """Per dataset, the posterior sd along each unidentified direction (by its
+        description) if one fell below :data:`COLLAPSE_SD_RATIO` of what the data allow there
+        (no data narrow it, so the sampler's particles collapsed and every interval of that
+        dataset is too narrow), else an empty dict."""
         return [
-            {name: ratios[name] for name in self.inert_parameters if name in ratios}
-            if any(ratios.get(name, 1.0) < COLLAPSE_SD_RATIO for name in self.inert_parameters)
+            {
+                direction.describe(): sd
+                for direction, sd in zip(self.unidentified, along, strict=True)
+            }
+            if any(
+                sd < COLLAPSE_SD_RATIO * direction.sd_ratio
+                for direction, sd in zip(self.unidentified, along, strict=True)
+            )
             else {}
-            for ratios in self.contraction
+            for along in self.sd_along
         ]
 
     def summary(self) -> dict:
@@ -124,8 +138,12 @@ class EstimationResult:
             "sd_ratio": self.contraction,
             "truth_in_95": self.covered,
             "n_truths_in_95": [sum(flags.values()) for flags in self.covered],
+            "unidentified": [
+                {"sd_ratio": d.sd_ratio, "loadings": d.loadings} for d in self.unidentified
+            ],
             "collapsed": self.collapsed,
             "n_simulations": self.n_simulations,
+            "n_identify_simulations": self.identify_simulations,
             "simulations_per_dataset": self.simulations,
             "wall_seconds": round(self.wall_seconds, 2),
         }
@@ -155,12 +173,30 @@ class EstimationResult:
 def _collapse_warnings(collapsed: list[dict[str, float]]) -> list[str]:
     """One line for each dataset whose particles collapsed (see ``EstimationResult.collapsed``)."""
     return [
-        f"dataset {k + 1}: the sd ratios of parameters that change no output fell to "
-        + ", ".join(f"{name} {ratio:.2f}" for name, ratio in inert.items())
-        + f" (below {COLLAPSE_SD_RATIO}): the particles collapsed, so this dataset's intervals "
-        "are too narrow; use more particles or a larger epsilon"
-        for k, inert in enumerate(collapsed)
-        if inert
+        f"dataset {k + 1}: along directions the data do not identify (expected sd ratio: "
+        "loadings) the posterior sd fell to "
+        + "; ".join(f"{ratio:.2f} along {described}" for described, ratio in along.items())
+        + f" of the prior's (below {COLLAPSE_SD_RATIO} of what the data allow): the particles "
+        "collapsed, so this dataset's intervals are too narrow; use more particles or a larger "
+        "epsilon"
+        for k, along in enumerate(collapsed)
+        if along
+    ]
+
+
+def _sd_along(tree: xr.DataTree, found: Identifiability) -> list[float]:
+    """Posterior sd along each direction ``found`` does not identify, in prior sds."""
+    posterior = tree["posterior"]
+    return [
+        float(
+            np.std(
+                sum(
+                    weight * posterior[name].values.ravel() / found.prior_sd[name]
+                    for name, weight in direction.loadings.items()
+                )
+            )
+        )
+        for direction in found.not_identified()
     ]
 
 
@@ -367,6 +403,13 @@ def estimation_study(
     prior = UniformPrior({spec.id: (spec.low, spec.high) for spec in unit.parameters})
     noise = None if sensor_noise else dict.fromkeys(OUTPUT_IDS, noise_bounds)
     with settings.open_executor() as executor:
+        found = identifiability(  # what no data can narrow: the particles must not either
+            calibration_model,
+            sensor_noise or SensorNoise.typical(),
+            at=truths[0],
+            executor=executor,
+            time_limit=settings.time_limit,
+        )
         if method != "rejection":
             calibration = smc_sequential_calibration(
                 calibration_model,
@@ -428,7 +471,9 @@ def estimation_study(
             for tree in calibration.trees
         ],
         wall_seconds=time.perf_counter() - started,
-        inert_parameters=unit.cycle_model.inert_parameters,
+        unidentified=found.not_identified(),
+        sd_along=[_sd_along(tree, found) for tree in calibration.trees],
+        identify_simulations=found.simulations,
     )
     for line in _collapse_warnings(result.collapsed):
         warnings.warn(line, RuntimeWarning, stacklevel=3)  # at the caller of the study

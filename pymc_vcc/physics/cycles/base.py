@@ -175,9 +175,6 @@ class CycleModel(ABC):
     """Further quantities after the outputs; must include ``M`` (kg) and ``mdot_src`` (kg/s)."""
     optional_output_ids: ClassVar[tuple[str, ...]] = ()
     """Diagnostics a simulator may also return as outputs (quantities field loggers measure)."""
-    inert_parameters: ClassVar[tuple[str, ...]] = ()
-    """Parameters that change no output by design: no data can narrow them, so a posterior
-    that does comes from a sampler whose particles collapsed."""
     capacity: ClassVar[str]
     """The diagnostic that is the unit's useful heat, W (what its COP divides)."""
     evaluate: ClassVar[Callable[..., bool]]

@@ -55,7 +55,6 @@ from pymc_vcc.physics.cycles.split_unit import (
     DIAGNOSTIC_INFO,
     DP_REG,
     FLOW_EPS,
-    INERT_PARAMETERS,
     OPTIONAL_OUTPUT_IDS,
     OUTPUT_INFO,
     PARAMETERS,
@@ -409,7 +408,6 @@ class SplitUnitCycle(CycleModel):
     output_info = OUTPUT_INFO
     diagnostic_info = DIAGNOSTIC_INFO
     optional_output_ids = OPTIONAL_OUTPUT_IDS
-    inert_parameters = INERT_PARAMETERS
     evaluate = staticmethod(evaluate)
     jacobian = staticmethod(jacobian)
     outputs_along = staticmethod(outputs_along)
