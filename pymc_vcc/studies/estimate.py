@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import pymc as pm
@@ -138,9 +138,7 @@ class EstimationResult:
             "sd_ratio": self.contraction,
             "truth_in_95": self.covered,
             "n_truths_in_95": [sum(flags.values()) for flags in self.covered],
-            "unidentified": [
-                {"sd_ratio": d.sd_ratio, "loadings": d.loadings} for d in self.unidentified
-            ],
+            "unidentified": [asdict(d) for d in self.unidentified],
             "collapsed": self.collapsed,
             "n_simulations": self.n_simulations,
             "n_identify_simulations": self.identify_simulations,
