@@ -269,27 +269,19 @@ class CvodeSolver:
         ends_on_output = t_out.size > 0 and t_out[-1] == t1
         targets = t_out if ends_on_output else np.append(t_out, t1)
         failure = None
-        advance, y = cvode.advance, cvode.y
-        reached = 0  # output rows filled
-        for row, target in enumerate(targets.tolist()):
-            if time.perf_counter() > deadline:
-                failure = _wall_clock_failure(self.wall_limit, cvode.t)
-                break
-            flag, t = advance(target)
-            if flag < 0:
-                failure = _failure(t, sundials.flag_name(flag), model.bad_rhs)
-                break
-            if row < t_out.size:
-                states_out[row] = y
-                reached = row + 1
-        finite = np.isfinite(states_out[:reached]).all(axis=1)
+        done, flag, late = cvode.advance_through(targets, states_out, deadline)
+        if late:
+            failure = _wall_clock_failure(self.wall_limit, cvode.t)
+        elif flag < 0:
+            failure = _failure(cvode.t, sundials.flag_name(flag), model.bad_rhs)
+        finite = np.isfinite(states_out[: min(done, t_out.size)]).all(axis=1)
         if not finite.all():  # the first non-finite state ends the run there
             first = int(np.argmin(finite))
             states_out[first:] = np.nan
             failure = Failure(
                 FailureKind.NON_FINITE, f"non-finite state at t = {t_out[first]:.2f} s"
             )
-        elif failure is None and not np.isfinite(y).all():
+        elif failure is None and not np.isfinite(cvode.y).all():
             failure = Failure(FailureKind.NON_FINITE, f"non-finite state at t = {cvode.t:.2f} s")
         n_steps, n_rhs, n_jac = cvode.statistics()
         self.counters.n_steps += n_steps

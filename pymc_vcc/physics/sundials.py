@@ -16,6 +16,7 @@ from __future__ import annotations
 import ctypes
 import functools
 import importlib.util
+import time
 import weakref
 from dataclasses import dataclass
 from pathlib import Path
@@ -207,7 +208,7 @@ class Cvode:
         """The current state (CVODE's own vector; copy it to keep it)."""
         self.y[:] = 0.0
         self._vector, self._memory, self._t = y, memory, ctypes.c_double()
-        self._step, self._t_reference = lib.CVode, ctypes.byref(self._t)  # bound once: per output
+        self._step, self._t_reference = lib.CVode, ctypes.byref(self._t)  # called per output
         for name, *arguments in (
             ("CVodeInit", callbacks.rhs, 0.0, y),
             ("CVodeSVtolerances", rtol, tolerances),
@@ -238,11 +239,26 @@ class Cvode:
         """The time reached, s."""
         return self._t.value
 
-    def advance(self, t_out: float) -> tuple[int, float]:
-        """Integrate until ``t_out`` (s), interpolated into :attr:`y`; return CVODE's flag
-        (negative: failed) and the time reached."""
-        flag = self._step(self._memory, t_out, self._vector, self._t_reference, CV_NORMAL)
-        return flag, self._t.value
+    def advance_through(
+        self, targets: np.ndarray, out: np.ndarray, deadline: float
+    ) -> tuple[int, int, bool]:
+        """Integrate to each of ``targets`` (s) in turn, the state interpolated at the first
+        ``len(out)`` of them into ``out``'s rows; stop at a failure, or before a target once
+        ``time.perf_counter()`` has passed ``deadline``. Returns the targets reached, CVODE's
+        last flag (negative: failed) and whether the deadline stopped it."""
+        step, memory, vector, reached, y = (
+            self._step, self._memory, self._vector, self._t_reference, self.y
+        )  # fmt: skip
+        rows, flag = len(out), 0
+        for row, target in enumerate(targets.tolist()):
+            if time.perf_counter() > deadline:
+                return row, flag, True
+            flag = step(memory, target, vector, reached, CV_NORMAL)
+            if flag < 0:
+                return row, flag, False
+            if row < rows:
+                out[row] = y
+        return len(targets), flag, False
 
     def statistics(self) -> tuple[int, int, int]:
         """Steps, right-hand sides and Jacobians since the last :meth:`restart`."""
