@@ -90,6 +90,7 @@ def test_directions_name_the_product_and_the_inert_parameter():
     assert found.conditional_sd_ratio["a"] < 0.1 < 0.5 < ratios["a"]  # alone known, jointly not
     described = weak[0].describe()
     assert described.startswith("1: +") and "c" not in described.split()
+    assert "c" not in weak[0].summary()["loadings"]  # JSON keeps the loadings that matter
     assert "2 of 4 directions not identified" in str(found)
 
 

@@ -245,10 +245,7 @@ def test_a_narrowed_unidentified_direction_flags_collapsed_particles():
         unidentified=[fan, losses],
         sd_along=[[0.95, 0.5], [0.9, 0.6]],
     )
-    assert result.collapsed == [
-        {"1: +1.00 FO_SPEED": 0.95, "0.8: +0.94 CF_PREF -0.33 CF_POW": 0.5},
-        {},
-    ]
+    assert result.collapsed == [{"0.8: +0.94 CF_PREF -0.33 CF_POW": 0.5}, {}]
     (line,) = _collapse_warnings(result.collapsed)
     assert line.startswith("dataset 1:") and "0.50 along 0.8: +0.94 CF_PREF -0.33 CF_POW" in line
 

@@ -47,6 +47,11 @@ class Direction:
     sd_ratio: float
     loadings: dict[str, float]
 
+    def summary(self, smallest: float = 0.01) -> dict:
+        """The ratio and the loadings at least ``smallest`` in size, for JSON."""
+        shown = {name: w for name, w in self.loadings.items() if abs(w) >= smallest}
+        return {"sd_ratio": self.sd_ratio, "loadings": shown}
+
     def describe(self, smallest: float = 0.1) -> str:
         """``"0.98: +0.71 CF_POW −0.70 CF_PREF"``: the ratio and the loadings above
         ``smallest`` in size, largest first."""

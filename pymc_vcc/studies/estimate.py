@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pymc as pm
@@ -109,19 +109,15 @@ class EstimationResult:
     @property
     def collapsed(self) -> list[dict[str, float]]:
         """Per dataset, the posterior sd along each unidentified direction (by its
-        description) if one fell below :data:`COLLAPSE_SD_RATIO` of what the data allow there
-        (no data narrow it, so the sampler's particles collapsed and every interval of that
-        dataset is too narrow), else an empty dict."""
+        description) that fell below :data:`COLLAPSE_SD_RATIO` of what the data allow there:
+        no data narrow it, so the sampler's particles collapsed and every interval of that
+        dataset is too narrow."""
         return [
             {
                 direction.describe(): sd
                 for direction, sd in zip(self.unidentified, along, strict=True)
+                if sd < COLLAPSE_SD_RATIO * direction.sd_ratio
             }
-            if any(
-                sd < COLLAPSE_SD_RATIO * direction.sd_ratio
-                for direction, sd in zip(self.unidentified, along, strict=True)
-            )
-            else {}
             for along in self.sd_along
         ]
 
@@ -138,7 +134,7 @@ class EstimationResult:
             "sd_ratio": self.contraction,
             "truth_in_95": self.covered,
             "n_truths_in_95": [sum(flags.values()) for flags in self.covered],
-            "unidentified": [asdict(d) for d in self.unidentified],
+            "unidentified": [d.summary() for d in self.unidentified],
             "collapsed": self.collapsed,
             "n_simulations": self.n_simulations,
             "n_identify_simulations": self.identify_simulations,

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import xarray as xr
 
@@ -41,7 +41,7 @@ class IdentifyResult:
             "prior_sd": found.prior_sd,
             "sd_ratio": found.sd_ratio,
             "conditional_sd_ratio": found.conditional_sd_ratio,
-            "not_identified": [asdict(d) for d in found.not_identified()],
+            "not_identified": [d.summary() for d in found.not_identified()],
             "failed": found.failed,
             "n_simulations": found.simulations,
             "wall_seconds": round(self.wall_seconds, 2),
