@@ -123,6 +123,24 @@ def test_bad_input_is_refused_in_one_line(kwargs, message):
         identifiability(Product(), SensorNoise(), **{"at": AT, **kwargs}, executor="serial")
 
 
+@dataclass(frozen=True)
+class Idle:
+    """A compressor's electrical power (W) that reads zero whatever ``a``."""
+
+    parameter_names: ClassVar[tuple[str, ...]] = ("a",)
+    output_names: ClassVar[tuple[str, ...]] = ("W_comp",)
+    bounds: ClassVar[dict[str, tuple[float, float]]] = {"a": (0.0, 1.0)}
+
+    def __call__(self, theta, rng) -> xr.Dataset:
+        power = theta["a"] * np.zeros(N_TIME)
+        return xr.Dataset({"W_comp": ("time", power, {"units": "W"})}, attrs={"status": "ok"})
+
+
+def test_a_zero_noise_scale_is_refused():
+    with pytest.raises(ValueError, match="sensor noise of output 'W_comp' is zero"):
+        identifiability(Idle(), SensorNoise.typical(), executor="serial")
+
+
 def test_a_failed_point_is_refused():
     with pytest.raises(RuntimeError, match="the simulation at the point failed: too large d"):
         identifiability(Product(fail_above=0.1), SensorNoise(), at=AT, executor="serial")

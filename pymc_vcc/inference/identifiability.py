@@ -250,6 +250,12 @@ def identifiability(
     template = prepare_observed(base, output_names=info.output_names)
     noise = sensor_noise.resolve(template)
     sigma = noise.std(template.values)
+    if not (sigma > 0).all():
+        zero = template.names[int(np.argmax(~(sigma > 0).all(axis=1)))]
+        raise ValueError(
+            f"the sensor noise of output {zero!r} is zero at the point (a relative scale of a "
+            "zero reading); give it an absolute scale or leave the output out"
+        )
 
     moves = []
     for name in names:
