@@ -240,8 +240,8 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
         q_sensible = 0.0
         q_latent = 0.0
         W_ind = humidity_ratio(T_ind, rh_ind)
-        flow_c = flow_scale(abs(m_comp) / cond.nominal_mass_flow)
-        flow_e = flow_scale(abs(m_valve) / evap.nominal_mass_flow)
+        scale_c = flow_scale(abs(m_comp) / cond.nominal_mass_flow)
+        scale_e = flow_scale(abs(m_valve) / evap.nominal_mass_flow)
         air_c = air_effectiveness(cond.air_capacity, cond.htc_air, cond.air_area)
         air_e = air_effectiveness(evap.air_capacity, evap.htc_air, evap.air_area)
         point_c = saturation_point(tables, p_c)
@@ -261,10 +261,10 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
             )
             h, x, T = h_zc[k], x_c[k], T_c[k]
             q_ref = remembered_cell_heat(
-                memo, i, tables, point_c, p_c, cond, tw, flow_c, h_in, x_in, T_in, h, x, T
+                memo, i, tables, point_c, p_c, cond, tw, scale_c, h_in, x_in, T_in, h, x, T
             )
             if remember:
-                remember_cell_heat(memo, i, p_c, tw, flow_c, h_in, x_in, T_in, h, x, T, q_ref)
+                remember_cell_heat(memo, i, p_c, tw, scale_c, h_in, x_in, T_in, h, x, T, q_ref)
             q_air = air_side_heat(cond.air_capacity, T_air_c, tw, air_c)
             dydt[at.Tw_cond + i] = (q_air - q_ref) / cond.wall_capacity
             src_c[k] = q_ref
@@ -275,10 +275,10 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
             )
             h, x, T = h_ze[i], x_e[i], T_e[i]
             q_ref = remembered_cell_heat(
-                memo, n + i, tables, point_e, p_e, evap, tw, flow_e, h_in, x_in, T_in, h, x, T
+                memo, n + i, tables, point_e, p_e, evap, tw, scale_e, h_in, x_in, T_in, h, x, T
             )
             if remember:
-                remember_cell_heat(memo, n + i, p_e, tw, flow_e, h_in, x_in, T_in, h, x, T, q_ref)
+                remember_cell_heat(memo, n + i, p_e, tw, scale_e, h_in, x_in, T_in, h, x, T, q_ref)
             q_air = air_side_heat(evap.air_capacity, T_air_e, tw, air_e)
             if not heating:  # the indoor coil evaporates: sensible and latent load
                 q_sensible += q_air
