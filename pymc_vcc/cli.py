@@ -24,17 +24,18 @@ from pymc_vcc.physics.solvers import METHODS
 def _settings(args: argparse.Namespace):
     from pymc_vcc.studies import StudySettings
 
+    study_options = {  # commands without a budget, resume or seed take StudySettings' own
+        name: getattr(args, name) for name in ("budget", "resume", "seed") if hasattr(args, name)
+    }
     return StudySettings(
-        budget=getattr(args, "budget", "small"),
         executor=args.executor,
         scheduler=args.scheduler,
         n_workers=args.workers,
         out=Path(args.out),
-        resume=getattr(args, "resume", False),
-        seed=getattr(args, "seed", 0),
         progress=None if not args.json else False,
         time_limit=args.time_limit,
         solver=args.solver,
+        **study_options,
     )
 
 
