@@ -42,9 +42,11 @@ def fillet_memo() -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def _fillet_ends(tables, p: float, centre: float, band: float, ends: np.ndarray) -> None:
-    """Write the fillet ends around the saturation line ``centre`` (quality 0 or 1) at ``p``."""
-    sat = saturation_point(tables, p)
+def _fillet_ends(
+    tables, sat: SaturationPoint, p: float, centre: float, band: float, ends: np.ndarray
+) -> None:
+    """Write the fillet ends around the saturation line ``centre`` (quality 0 or 1) at ``p``,
+    whose :func:`saturation_point` is ``sat``."""
     latent = sat.h_v - sat.h_l
     width = 2.0 * band * latent
     start = sat.h_l + (centre - band) * latent
@@ -100,23 +102,35 @@ def _band_centre(x: float, band: float) -> float:
 
 @njit(cache=True, error_model="numpy")
 def cell_state(
-    tables, sat: SaturationPoint, p: float, h: float, memo: np.ndarray
+    tables,
+    sat: SaturationPoint,
+    p: float,
+    h: float,
+    memo: np.ndarray,
+    pressure_slope: bool = True,
 ) -> tuple[float, float, float, float, float]:
     """(T K, ρ kg/m³, ∂ρ/∂p s²/m², ∂ρ/∂h kg² s²/m⁵... i.e. (kg/m³)/(J/kg), unclipped quality)
     like ``refrigerant.state`` but with the C² density near the saturation lines. ``sat`` is the
     :func:`~pymc_vcc.physics.refrigerant.saturation_point` of ``p``; ``memo`` (from
-    :func:`fillet_memo`) keeps the fillet ends of the latest pressure."""
+    :func:`fillet_memo`) keeps the fillet ends of the latest pressure. Without
+    ``pressure_slope`` a cell in a fillet band skips the ends at p ± dp and its ∂ρ/∂p is NaN
+    (two thirds of the fillet's cost, for callers that need the state alone)."""
     T, rho, drho_dp, drho_dh, x = state_at(tables, sat, p, h)
     centre = _band_centre(x, QUALITY_BAND)
     if centre < 0.0:
         return T, rho, drho_dp, drho_dh, x
     ends = memo[int(centre)]
-    dp = 1e-6 * p
     if ends[0, 0] != p:
-        _fillet_ends(tables, p, centre, QUALITY_BAND, ends[0])
-        _fillet_ends(tables, p + dp, centre, QUALITY_BAND, ends[1])
-        _fillet_ends(tables, p - dp, centre, QUALITY_BAND, ends[2])
+        _fillet_ends(tables, sat, p, centre, QUALITY_BAND, ends[0])
+        ends[1, 0] = np.nan  # the ends at p ± dp belong to another pressure now
     rho, drho_dh = _fillet(ends[0], h)
+    if not pressure_slope:
+        return T, rho, np.nan, drho_dh, x
+    dp = 1e-6 * p
+    above, below = p + dp, p - dp
+    if ends[1, 0] != above:
+        _fillet_ends(tables, saturation_point(tables, above), above, centre, QUALITY_BAND, ends[1])
+        _fillet_ends(tables, saturation_point(tables, below), below, centre, QUALITY_BAND, ends[2])
     up = _fillet(ends[1], h)[0]
     down = _fillet(ends[2], h)[0]
     return T, rho, (up - down) / (2.0 * dp), drho_dh, x

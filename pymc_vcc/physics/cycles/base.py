@@ -251,9 +251,11 @@ def place_charge(
 
 
 @njit(cache=True, error_model="numpy")
-def zone_cells(y, zones, first, last, tables, props):
+def zone_cells(y, zones, first, last, tables, props, pressure_slope=True, memo=None):
     """Properties of cells ``first`` to ``last`` (cells numbered zone after zone; all of one
-    zone, so they share its pressure's saturation point) into those columns of ``props``."""
+    zone, so they share its pressure's saturation point) into those columns of ``props``;
+    without ``pressure_slope`` ∂ρ/∂p may be NaN (see :func:`cell_state`). A ``memo`` from
+    :func:`fillet_memo` carries fillet ends over from earlier calls at the same pressure."""
     zone = 0
     k = first
     while k >= zones[zone, 1]:
@@ -262,10 +264,11 @@ def zone_cells(y, zones, first, last, tables, props):
     p_index = zones[zone, 0]
     p = y[p_index]
     sat = saturation_point(tables, p)
-    memo = fillet_memo()
+    if memo is None:
+        memo = fillet_memo()
     for i in range(first, last + 1):
         h = y[p_index + 1 + k + i - first]
-        T, rho, drho_dp, drho_dh, x = cell_state(tables, sat, p, h, memo)
+        T, rho, drho_dp, drho_dh, x = cell_state(tables, sat, p, h, memo, pressure_slope)
         props[0, i] = T
         props[1, i] = rho
         props[2, i] = drho_dp
@@ -274,12 +277,12 @@ def zone_cells(y, zones, first, last, tables, props):
 
 
 @njit(cache=True, error_model="numpy")
-def cell_properties(y, zones, tables, props):
+def cell_properties(y, zones, tables, props, pressure_slope=True):
     """Fill ``props`` (shape (N_PROPERTIES, cells)) for every cell; False if a property left
-    the tables."""
+    the tables. Without ``pressure_slope`` ∂ρ/∂p may be NaN (outputs need none)."""
     first = 0
     for zone in range(zones.shape[0]):
-        zone_cells(y, zones, first, first + zones[zone, 1] - 1, tables, props)
+        zone_cells(y, zones, first, first + zones[zone, 1] - 1, tables, props, pressure_slope)
         first += zones[zone, 1]
     return bool(np.isfinite(props[1]).all())
 
@@ -310,14 +313,14 @@ def column_cells(zones, j):
 
 
 @njit(cache=True, error_model="numpy")
-def perturb(y, work, j, zones, tables, props):
+def perturb(y, work, j, zones, tables, props, memo):
     """Step state variable ``j`` of ``work`` for a forward difference and update the cell
-    properties it touches; returns the step."""
+    properties it touches (``memo``: see :func:`zone_cells`); returns the step."""
     step = 1e-7 * max(abs(y[j]), 1.0)
     work[j] = y[j] + step
     first, last = column_cells(zones, j)
     if first <= last:
-        zone_cells(work, zones, first, last, tables, props)
+        zone_cells(work, zones, first, last, tables, props, True, memo)
     return step
 
 

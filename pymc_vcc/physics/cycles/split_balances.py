@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from pymc_vcc.physics.components.compressor import compressor, protection_speed_factor
+from pymc_vcc.physics.components.density import fillet_memo
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
@@ -373,9 +374,10 @@ def jacobian(y, u, constants, tables, f0):
     out = np.empty(N_EVAL)
     n = c.layout.h_liquid_line - c.layout.h_cond
     memo = np.full((2 * n, MEMO_COLUMNS), np.nan)
+    fillets = fillet_memo()  # enthalpy columns keep their zone's pressure and its fillet ends
     balances(y, u, c, tables, props, dydt, out, True, memo, True)  # the cells' heats at y
     for j in range(y.size):
-        step = perturb(y, work, j, zones, tables, props)
+        step = perturb(y, work, j, zones, tables, props, fillets)
         balances(work, u, c, tables, props, dydt, out, True, memo, False)
         for i in range(y.size):
             jac[i, j] = (dydt[i] - f0[i]) / step
@@ -393,7 +395,7 @@ def outputs_along(ys, us, constants, tables, rates):
     dydt = np.empty(ys.shape[1])
     out = np.empty(N_EVAL)
     for k in range(ys.shape[0]):
-        cell_properties(ys[k], c.layout.zones, tables, props)
+        cell_properties(ys[k], c.layout.zones, tables, props, rates)
         balances(ys[k], us[k], c, tables, props, dydt, out, rates)
         result[k] = out
     return result
