@@ -251,11 +251,11 @@ def place_charge(
 
 
 @njit(cache=True, error_model="numpy")
-def zone_cells(y, zones, first, last, tables, props, pressure_slope=True, memo=None):
+def zone_cells(y, zones, first, last, tables, props, memo=None):
     """Properties of cells ``first`` to ``last`` (cells numbered zone after zone; all of one
-    zone, so they share its pressure's saturation point) into those columns of ``props``;
-    without ``pressure_slope`` ∂ρ/∂p may be NaN (see :func:`cell_state`). A ``memo`` from
-    :func:`fillet_memo` carries fillet ends over from earlier calls at the same pressure."""
+    zone, so they share its pressure's saturation point) into those columns of ``props``. A
+    ``memo`` from :func:`fillet_memo` carries fillet ends over from earlier calls at the same
+    pressure."""
     zone = 0
     k = first
     while k >= zones[zone, 1]:
@@ -268,7 +268,7 @@ def zone_cells(y, zones, first, last, tables, props, pressure_slope=True, memo=N
         memo = fillet_memo()
     for i in range(first, last + 1):
         h = y[p_index + 1 + k + i - first]
-        T, rho, drho_dp, drho_dh, x = cell_state(tables, sat, p, h, memo, pressure_slope)
+        T, rho, drho_dp, drho_dh, x = cell_state(tables, sat, p, h, memo)
         props[0, i] = T
         props[1, i] = rho
         props[2, i] = drho_dp
@@ -277,12 +277,12 @@ def zone_cells(y, zones, first, last, tables, props, pressure_slope=True, memo=N
 
 
 @njit(cache=True, error_model="numpy")
-def cell_properties(y, zones, tables, props, pressure_slope=True):
+def cell_properties(y, zones, tables, props):
     """Fill ``props`` (shape (N_PROPERTIES, cells)) for every cell; False if a property left
-    the tables. Without ``pressure_slope`` ∂ρ/∂p may be NaN (outputs need none)."""
+    the tables."""
     first = 0
     for zone in range(zones.shape[0]):
-        zone_cells(y, zones, first, first + zones[zone, 1] - 1, tables, props, pressure_slope)
+        zone_cells(y, zones, first, first + zones[zone, 1] - 1, tables, props)
         first += zones[zone, 1]
     return bool(np.isfinite(props[1]).all())
 
@@ -320,7 +320,7 @@ def perturb(y, work, j, zones, tables, props, memo):
     work[j] = y[j] + step
     first, last = column_cells(zones, j)
     if first <= last:
-        zone_cells(work, zones, first, last, tables, props, True, memo)
+        zone_cells(work, zones, first, last, tables, props, memo)
     return step
 
 

@@ -395,7 +395,7 @@ def outputs_along(ys, us, constants, tables, rates):
     dydt = np.empty(ys.shape[1])
     out = np.empty(N_EVAL)
     for k in range(ys.shape[0]):
-        cell_properties(ys[k], c.layout.zones, tables, props, rates)
+        cell_properties(ys[k], c.layout.zones, tables, props)
         balances(ys[k], us[k], c, tables, props, dydt, out, rates)
         result[k] = out
     return result

@@ -16,6 +16,7 @@ from pymc_vcc.physics.refrigerant.fluid import (
 from pymc_vcc.physics.refrigerant.kernels import (
     SaturationPoint,
     density_h_derivatives,
+    density_h_derivatives_along,
     density_h_derivatives_at,
     enthalpy_bounds,
     entropy,
@@ -41,6 +42,7 @@ __all__ = [
     "SaturationPoint",
     "TableResolution",
     "density_h_derivatives",
+    "density_h_derivatives_along",
     "density_h_derivatives_at",
     "enthalpy_bounds",
     "entropy",

@@ -184,6 +184,45 @@ def _bicubic_xi(
 
 
 @njit(cache=True)
+def _bicubic_jet(
+    table: np.ndarray, k: int, i: int, j: int, dp: float, dxi: float, t: float, r: float
+) -> tuple[float, float, float, float, float, float, float]:
+    """Property k of a single-phase table: value R and R_xi, R_xixi, R_xixixi, R_p, R_pxi,
+    R_pxixi (p-derivatives at constant xi)."""
+    a00, a10, a01, a11, da00, da10, da01, da11 = _hermite_basis(t)
+    b00, b10, b01, b11, db00, db10, db01, db11 = _hermite_basis(r)
+    e00, e10, e01, e11 = _hermite_second(r)
+    value = d_x = d_xx = d_xxx = d_p = d_px = d_pxx = 0.0
+    for corner_p in range(2):
+        if corner_p == 0:
+            hp, gp, dhp, dgp = a00, a10 * dp, da00 / dp, da10
+        else:
+            hp, gp, dhp, dgp = a01, a11 * dp, da01 / dp, da11
+        for corner_xi in range(2):
+            # the xi basis of this node (value, slope), its xi-derivatives (the second in r)
+            if corner_xi == 0:
+                hx, dhx, ehx, thx = b00, db00 / dxi, e00, 12.0 / dxi**3
+                gx, dgx, egx = b10 * dxi, db10, e10
+            else:
+                hx, dhx, ehx, thx = b01, db01 / dxi, e01, -12.0 / dxi**3
+                gx, dgx, egx = b11 * dxi, db11, e11
+            tgx = 6.0 / dxi**2
+            node = table[i + corner_p, j + corner_xi, k]
+            along = hp * node[VALUE] + gp * node[D_P]  # value and xi-slope at this xi node
+            slope = hp * node[D_XI] + gp * node[D_P_XI]
+            along_p = dhp * node[VALUE] + dgp * node[D_P]  # and their p-derivatives
+            slope_p = dhp * node[D_XI] + dgp * node[D_P_XI]
+            value += hx * along + gx * slope
+            d_x += dhx * along + dgx * slope
+            d_xx += (ehx * along / dxi + egx * slope) / dxi  # as in _bicubic_xi
+            d_xxx += thx * along + tgx * slope
+            d_p += hx * along_p + gx * slope_p
+            d_px += dhx * along_p + dgx * slope_p
+            d_pxx += (ehx * along_p / dxi + egx * slope_p) / dxi
+    return value, d_x, d_xx, d_xxx, d_p, d_px, d_pxx
+
+
+@njit(cache=True)
 def _region(
     tables: PropertyTables,
     p: float,
@@ -322,6 +361,50 @@ def density_h_derivatives_at(
     rho = 1.0 / (1.0 / rho_l + (h - h_l) * v_h)
     drho_dh = -rho * rho * v_h
     return rho, drho_dh, 2.0 * drho_dh * drho_dh / rho
+
+
+@njit(cache=True)
+def density_h_derivatives_along(
+    tables: PropertyTables, sat: SaturationPoint, p: float, h: float, h_p: float
+) -> tuple[float, float, float, float, float, float]:
+    """:func:`density_h_derivatives_at` (ρ, ∂ρ/∂h, ∂²ρ/∂h²) and the derivative of each in p
+    along the path h(p) through (p, h) with slope ``h_p`` = dh/dp (J/kg/Pa): the p-derivatives
+    come in the same units per Pa. NaNs outside the tables."""
+    h_l, h_v, rho_l, rho_v = sat.h_l, sat.h_v, sat.rho_l, sat.rho_v
+    if not (sat.inside and h >= sat.h_min and h <= sat.h_max):
+        return NAN, NAN, NAN, NAN, NAN, NAN
+    if h < h_l or h > h_v:
+        table, ip, jx, dp, dxi, tp, rx, w, xi_p = _single_phase(tables, sat, p, h)
+        w_p = sat.h_l_p - sat.h_min_p if h < h_l else sat.h_max_p - sat.h_v_p
+        R, R_x, R_xx, R_xxx, R_p, R_px, R_pxx = _bicubic_jet(
+            table, PROP_RHO, ip, jx, dp, dxi, tp, rx
+        )
+        xi_along = xi_p + h_p / w  # dxi/dp along the path
+        return (
+            R,
+            R_x / w,
+            R_xx / (w * w),
+            R_p + R_x * xi_along,
+            (R_px + R_xx * xi_along) / w - R_x * w_p / (w * w),
+            (R_pxx + R_xxx * xi_along) / (w * w) - 2.0 * R_xx * w_p / (w * w * w),
+        )
+    latent = h_v - h_l
+    latent_p = sat.h_v_p - sat.h_l_p
+    v_l_p = -sat.rho_l_p / (rho_l * rho_l)
+    v_v_p = -sat.rho_v_p / (rho_v * rho_v)
+    gap = 1.0 / rho_v - 1.0 / rho_l
+    v_h = gap / latent
+    v_h_p = ((v_v_p - v_l_p) * latent - gap * latent_p) / (latent * latent)
+    rho = 1.0 / (1.0 / rho_l + (h - h_l) * v_h)
+    v_along = v_l_p + (h_p - sat.h_l_p) * v_h + (h - h_l) * v_h_p
+    rho_along = -rho * rho * v_along
+    drho_dh = -rho * rho * v_h
+    drho_dh_along = -2.0 * rho * rho_along * v_h - rho * rho * v_h_p
+    curvature = 2.0 * drho_dh * drho_dh / rho
+    curvature_along = 4.0 * drho_dh * drho_dh_along / rho - 2.0 * drho_dh * drho_dh * rho_along / (
+        rho * rho
+    )
+    return rho, drho_dh, curvature, rho_along, drho_dh_along, curvature_along
 
 
 @njit(cache=True)
