@@ -251,8 +251,9 @@ class CvodeSolver:
 
     One CVODE instance serves every segment of a model (re-initialised at each segment's start,
     which stops it at the segment's end); the outputs come from CVODE's own interpolation in normal
-    mode, so it never stops at them. The wall clock is read between output times (at most
-    :attr:`MAX_STEPS` steps apart); the states are checked finite once per segment.
+    mode, so it never stops at them; a compiled loop calls CVODE for the output times (see
+    :meth:`~pymc_vcc.physics.sundials.Cvode.advance_through`), and the wall clock is read
+    between its chunks of output times; the states are checked finite once per segment.
     """
 
     MAX_STEPS = 20_000

@@ -23,6 +23,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+from llvmlite import ir
 from numba import carray, njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
@@ -151,6 +152,47 @@ def dense_matrix_data(matrix, n):
     return carray(_content_pointer(matrix, 1), (n, n), np.float64)
 
 
+@intrinsic
+def _call_cvode(typingctx, function, memory, target, vector, reached):
+    """``CVode(memory, target, vector, reached, CV_NORMAL)`` through its address ``function``
+    (all four pointers as int64): one call from machine code, no ctypes."""
+
+    def codegen(context, builder, signature, args):
+        function, memory, target, vector, reached = args
+        pointer = cgutils.voidptr_t
+        cvode_type = ir.FunctionType(
+            ir.IntType(32), [pointer, ir.DoubleType(), pointer, pointer, ir.IntType(32)]
+        )
+        cvode = builder.inttoptr(function, cvode_type.as_pointer())
+        return builder.call(
+            cvode,
+            [
+                builder.inttoptr(memory, pointer),
+                target,
+                builder.inttoptr(vector, pointer),
+                builder.inttoptr(reached, pointer),
+                ir.Constant(ir.IntType(32), CV_NORMAL),
+            ],
+        )
+
+    return types.int32(types.int64, types.int64, types.float64, types.int64, types.int64), codegen
+
+
+@njit(cache=True)
+def _advance(function, memory, vector, reached, targets, first, last, out):
+    """Call CVODE for ``targets[first:last]`` in turn, the state at each target whose index is
+    a row of ``out`` copied there; returns (the first target not reached, CVODE's last flag)."""
+    y = vector_data(as_pointer(vector), out.shape[1])
+    flag = 0
+    for row in range(first, last):
+        flag = _call_cvode(function, memory, targets[row], vector, reached)
+        if flag < 0:
+            return row, flag
+        if row < out.shape[0]:
+            out[row] = y
+    return last, flag
+
+
 _MEANINGS = {
     "CV_TOO_MUCH_WORK": "too many steps before the next output time",
     "CV_TOO_CLOSE": "output time too close to the start",
@@ -207,8 +249,13 @@ class Cvode:
         self.y = np.ctypeslib.as_array(lib.N_VGetArrayPointer_Serial(y), (n,))
         """The current state (CVODE's own vector; copy it to keep it)."""
         self.y[:] = 0.0
-        self._vector, self._memory, self._t = y, memory, ctypes.c_double()
-        self._step, self._t_reference = lib.CVode, ctypes.byref(self._t)  # called per output
+        self._vector, self._memory, self._t = y, memory, np.zeros(1)
+        self._addresses = (  # what the compiled output loop passes to CVode
+            ctypes.cast(lib.CVode, ctypes.c_void_p).value,
+            memory,
+            y,
+            self._t.ctypes.data,
+        )
         for name, *arguments in (
             ("CVodeInit", callbacks.rhs, 0.0, y),
             ("CVodeSVtolerances", rtol, tolerances),
@@ -230,35 +277,37 @@ class Cvode:
         """Start afresh from ``y0`` at ``t0`` (s), never stepping past ``t_stop``; the counts
         of :meth:`statistics` start again from zero."""
         self.y[:] = y0
-        self._t.value = t0
+        self._t[0] = t0
         _check(self._lib.CVodeReInit(self._memory, t0, self._vector), "CVodeReInit")
         _check(self._lib.CVodeSetStopTime(self._memory, t_stop), "CVodeSetStopTime")
 
     @property
     def t(self) -> float:
         """The time reached, s."""
-        return self._t.value
+        return float(self._t[0])
+
+    CHUNK = 64
+    """Output times integrated by one compiled call between two looks at the wall clock."""
 
     def advance_through(
         self, targets: np.ndarray, out: np.ndarray, deadline: float
     ) -> tuple[int, int, bool]:
         """Integrate to each of ``targets`` (s) in turn, the state interpolated at the first
-        ``len(out)`` of them into ``out``'s rows; stop at a failure, or before a target once
-        ``time.perf_counter()`` has passed ``deadline``. Returns the targets reached, CVODE's
-        last flag (negative: failed) and whether the deadline stopped it."""
-        step, memory, vector, reached, y = (
-            self._step, self._memory, self._vector, self._t_reference, self.y
-        )  # fmt: skip
-        rows, flag = len(out), 0
-        for row, target in enumerate(targets.tolist()):
+        ``len(out)`` of them into ``out``'s rows; stop at a failure, or before the next
+        :attr:`CHUNK` of targets once ``time.perf_counter()`` has passed ``deadline``. Returns
+        the targets reached, CVODE's last flag (negative: failed) and whether the deadline
+        stopped it."""
+        addresses = self._addresses
+        done, flag = 0, 0
+        while done < len(targets):
             if time.perf_counter() > deadline:
-                return row, flag, True
-            flag = step(memory, target, vector, reached, CV_NORMAL)
+                return done, flag, True
+            done, flag = _advance(
+                *addresses, targets, done, min(done + self.CHUNK, len(targets)), out
+            )
             if flag < 0:
-                return row, flag, False
-            if row < rows:
-                out[row] = y
-        return len(targets), flag, False
+                return done, flag, False
+        return done, flag, False
 
     def statistics(self) -> tuple[int, int, int]:
         """Steps, right-hand sides and Jacobians since the last :meth:`restart`."""
