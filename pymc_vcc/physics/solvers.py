@@ -16,21 +16,9 @@ C callbacks.
 
 At equal tolerances BDF's error control lets more global error through than Radau's, so CVODE
 runs at :data:`CVODE_TOLERANCE_SCALE` times the unit's tolerances, which keeps it at least as
-accurate as Radau. Measured over nominal and 40 Table III box draws (seed 7; 1060 s of the
-Fig. 4 profile; largest error as a fraction of each output's range, against CVODE at a
-thousandth of the unit's tolerances):
-
-=============== ======= ======= =======  ===================
-solver          median  90 %    worst    right-hand sides
-=============== ======= ======= =======  ===================
-Radau           2.0e-3  6.6e-3  0.45     1411
-CVODE × 0.03    4.7e-4  1.7e-3  0.16     1252
-CVODE × 0.1     1.4e-3  3.2e-3  0.20     1055
-CVODE × 0.2     2.5e-3  7.3e-3  0.18     997
-=============== ======= ======= =======  ===================
-
-At 0.1 a run takes 8 % less time than at 0.03 (median over the draws) and is still closer to
-the reference than Radau at the median, the 90th percentile and the worst draw.
+accurate as Radau: over nominal and 40 box draws (1060 s, against CVODE at a thousandth of the
+unit's tolerances) its largest error is 1.4e-3 of an output's range at the median and 3.2e-3
+at the 90th percentile, against Radau's 2.0e-3 and 6.6e-3 (README: "Two solvers").
 """
 
 from __future__ import annotations
