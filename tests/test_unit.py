@@ -95,6 +95,16 @@ def test_with_changes_validates():
         unit.with_changes(nonsense={"a": 1})
 
 
+def test_with_tolerances_scales_rtol_and_every_atol_alone():
+    unit = load_unit()
+    tight = unit.with_tolerances(0.1)
+    for name in ("rtol", "atol_pressure", "atol_enthalpy", "atol_temperature"):
+        assert getattr(tight.solver, name) == pytest.approx(0.1 * getattr(unit.solver, name))
+    assert tight.solver.max_step == unit.solver.max_step and tight.parameters == unit.parameters
+    with pytest.raises(ValueError, match="tolerance scale must be positive, got 0"):
+        unit.with_tolerances(0)
+
+
 def test_the_worked_example_of_models_readme_loads_and_runs():
     from pathlib import Path
 

@@ -41,7 +41,7 @@ from pymc_vcc.inference.samplers import SAMPLERS, SmcKernel
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
-from pymc_vcc.physics.unit import Unit
+from pymc_vcc.physics.unit import DIFFERENCING_TOLERANCE_SCALE, Unit
 from pymc_vcc.plots import (
     labeller,
     plot_inputs,
@@ -398,7 +398,11 @@ def estimation_study(
     noise = None if sensor_noise else dict.fromkeys(OUTPUT_IDS, noise_bounds)
     with settings.open_executor() as executor:
         found = identifiability(  # what no data can narrow: the particles must not either
-            calibration_model,
+            VCCSimulator(
+                unit.with_tolerances(DIFFERENCING_TOLERANCE_SCALE),
+                full.inputs,
+                t_window=(0.0, t_calibration),
+            ),
             sensor_noise or SensorNoise.typical(),
             at=truths[0],
             executor=executor,

@@ -19,7 +19,7 @@ import xarray as xr
 from pymc_vcc.inference.identifiability import Identifiability, identifiability
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.physics.simulate import VCCSimulator
-from pymc_vcc.physics.unit import Unit
+from pymc_vcc.physics.unit import DIFFERENCING_TOLERANCE_SCALE, Unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 
 
@@ -69,7 +69,12 @@ def identify_study(
     profile) under ``sensor_noise`` (default: typical)."""
     started = time.perf_counter()
     unit = settings.unit(unit)
-    simulator = VCCSimulator(unit, inputs, t_window=(0.0, t_end), parameters=parameters)
+    simulator = VCCSimulator(
+        unit.with_tolerances(DIFFERENCING_TOLERANCE_SCALE),
+        inputs,
+        t_window=(0.0, t_end),
+        parameters=parameters,
+    )
     point = {spec.id: spec.nominal for spec in unit.parameters} | dict(at or {})
     with settings.open_executor() as executor:
         found = identifiability(
