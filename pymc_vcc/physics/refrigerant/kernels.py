@@ -446,20 +446,36 @@ def entropy(tables: PropertyTables, p: float, h: float) -> float:
 
 
 @njit(cache=True)
+def _along_xi_node(
+    table: np.ndarray, k: int, ip: int, j: int, hp0: float, gp0: float, hp1: float, gp1: float
+) -> tuple[float, float]:
+    """Property k and its xi-slope at xi node j, at the pressure whose Hermite weights in p are
+    ``hp0, gp0`` (node ip) and ``hp1, gp1`` (node ip + 1, the slope weights times dp)."""
+    low = table[ip, j, k]
+    high = table[ip + 1, j, k]
+    value = hp0 * low[VALUE] + gp0 * low[D_P] + hp1 * high[VALUE] + gp1 * high[D_P]
+    slope = hp0 * low[D_XI] + gp0 * low[D_P_XI] + hp1 * high[D_XI] + gp1 * high[D_P_XI]
+    return value, slope
+
+
+@njit(cache=True)
 def _invert_region(tables: PropertyTables, p: float, k: int, target: float, liquid: bool) -> float:
     """The xi in [0, 1] of the liquid or vapour table where property k equals target at p.
 
     Property k must increase with xi (T and s do); NaN when target lies outside its values at
-    xi = 0 and xi = 1 (beyond round-off). Newton steps, bisection when a step leaves the bracket.
+    xi = 0 and xi = 1 (beyond round-off). At p the table is a cubic Hermite curve in xi: the
+    node interval holding ``target`` is found by bisection on the node values, then Newton
+    steps on that interval's cubic, bisection when a step leaves the bracket.
     """
     table = tables.liquid if liquid else tables.vapour
     xi_nodes = tables.liquid_xi if liquid else tables.vapour_xi
     ip = _interval(tables.table_p, p)
     dp = tables.table_p[ip + 1] - tables.table_p[ip]
-    tp = (p - tables.table_p[ip]) / dp
-    last = xi_nodes.size - 2
-    f_lo, _, _ = _bicubic(table, k, ip, 0, dp, xi_nodes[1] - xi_nodes[0], tp, 0.0)
-    f_hi, _, _ = _bicubic(table, k, ip, last, dp, xi_nodes[last + 1] - xi_nodes[last], tp, 1.0)
+    a00, a10, a01, a11, _, _, _, _ = _hermite_basis((p - tables.table_p[ip]) / dp)
+    weights = (a00, a10 * dp, a01, a11 * dp)
+    last = xi_nodes.size - 1
+    f_lo = _along_xi_node(table, k, ip, 0, *weights)[0]
+    f_hi = _along_xi_node(table, k, ip, last, *weights)[0]
     slack = 1e-8 * (abs(f_lo) + abs(f_hi))  # T at xi = 0, 1 is T_min, T_max to ~1e-7 K
     if not (target >= f_lo - slack and target <= f_hi + slack):
         return NAN
@@ -467,25 +483,37 @@ def _invert_region(tables: PropertyTables, p: float, k: int, target: float, liqu
         return 0.0
     if target >= f_hi:
         return 1.0
+    lo_node = 0
+    hi_node = last
+    while hi_node - lo_node > 1:
+        mid = (lo_node + hi_node) >> 1
+        if _along_xi_node(table, k, ip, mid, *weights)[0] <= target:
+            lo_node = mid
+        else:
+            hi_node = mid
+    dxi = xi_nodes[hi_node] - xi_nodes[lo_node]
+    f0, m0 = _along_xi_node(table, k, ip, lo_node, *weights)
+    f1, m1 = _along_xi_node(table, k, ip, hi_node, *weights)
+    m0 *= dxi
+    m1 *= dxi
     lo = 0.0
     hi = 1.0
-    xi = (target - f_lo) / (f_hi - f_lo)
+    r = (target - f0) / (f1 - f0) if f1 > f0 else 0.5
     for _ in range(_MAX_ITERATIONS):
-        jx = _interval(xi_nodes, xi)
-        dxi = xi_nodes[jx + 1] - xi_nodes[jx]
-        f, _, f_xi = _bicubic(table, k, ip, jx, dp, dxi, tp, (xi - xi_nodes[jx]) / dxi)
-        residual = f - target
+        h00, h10, h01, h11, d00, d10, d01, d11 = _hermite_basis(r)
+        residual = h00 * f0 + h10 * m0 + h01 * f1 + h11 * m1 - target
+        slope = d00 * f0 + d10 * m0 + d01 * f1 + d11 * m1
         if residual > 0.0:
-            hi = xi
+            hi = r
         else:
-            lo = xi
-        new = xi - residual / f_xi if f_xi > 0.0 else 0.5 * (lo + hi)
+            lo = r
+        new = r - residual / slope if slope > 0.0 else 0.5 * (lo + hi)
         if not (new >= lo and new <= hi):
             new = 0.5 * (lo + hi)
-        if abs(new - xi) < 1e-13:
-            return new
-        xi = new
-    return xi
+        if abs(new - r) * dxi < 1e-13:
+            return xi_nodes[lo_node] + new * dxi
+        r = new
+    return xi_nodes[lo_node] + r * dxi
 
 
 @njit(cache=True)
