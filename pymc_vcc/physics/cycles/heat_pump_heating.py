@@ -91,7 +91,8 @@ class HeatPumpHeating(SplitUnitCycle):
         self, c: np.ndarray, n_volumes: int, inputs: np.ndarray, tables
     ) -> np.ndarray:
         """Initialisation by M0 alone: condensing 20 K above the indoor air, evaporating 8 K
-        below the outdoor air, the fill level of :func:`filled_state` found by bisection."""
+        below the outdoor air, the fill level of :func:`filled_state` found by root-finding on the
+        total mass (:func:`~.base.place_charge`)."""
         p_c = p_sat_from_T(tables, inputs[3] + 20.0)
         p_e = p_sat_from_T(tables, inputs[2] - 8.0)
         return place_charge(

@@ -98,7 +98,7 @@ class SplitCooling(SplitUnitCycle):
     ) -> np.ndarray:
         """The paper's initialisation by M0 alone: condensing 12 K above the outdoor air,
         evaporating 18 K below the indoor air, the fill level of :func:`filled_state` found
-        by bisection on the total mass."""
+        by root-finding on the total mass (:func:`~.base.place_charge`)."""
         p_c = p_sat_from_T(tables, inputs[2] + 12.0)
         p_e = p_sat_from_T(tables, inputs[3] - 18.0)
         return place_charge(
