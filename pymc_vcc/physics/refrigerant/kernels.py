@@ -157,33 +157,6 @@ def _bicubic(
 
 
 @njit(cache=True)
-def _bicubic_xi(
-    table: np.ndarray, k: int, i: int, j: int, dp: float, dxi: float, t: float, r: float
-) -> tuple[float, float, float]:
-    """Property k of a single-phase table: value, d/dxi and d²/dxi² at constant p."""
-    a00, a10, a01, a11, _, _, _, _ = _hermite_basis(t)
-    b00, b10, b01, b11, db00, db10, db01, db11 = _hermite_basis(r)
-    e00, e10, e01, e11 = _hermite_second(r)
-    value = 0.0
-    d_xi = 0.0
-    d_xixi = 0.0
-    for corner_p in range(2):
-        hp, gp = (a00, a10 * dp) if corner_p == 0 else (a01, a11 * dp)
-        for corner_xi in range(2):
-            if corner_xi == 0:
-                hx, gx, dhx, dgx, ehx, egx = b00, b10 * dxi, db00 / dxi, db10, e00, e10
-            else:
-                hx, gx, dhx, dgx, ehx, egx = b01, b11 * dxi, db01 / dxi, db11, e01, e11
-            node = table[i + corner_p, j + corner_xi, k]
-            along = hp * node[VALUE] + gp * node[D_P]  # value and xi-slope at this xi node
-            slope = hp * node[D_XI] + gp * node[D_P_XI]
-            value += hx * along + gx * slope
-            d_xi += dhx * along + dgx * slope
-            d_xixi += (ehx * along / dxi + egx * slope) / dxi
-    return value, d_xi, d_xixi
-
-
-@njit(cache=True)
 def _bicubic_jet(
     table: np.ndarray, k: int, i: int, j: int, dp: float, dxi: float, t: float, r: float
 ) -> tuple[float, float, float, float, float, float, float]:
@@ -214,7 +187,7 @@ def _bicubic_jet(
             slope_p = dhp * node[D_XI] + dgp * node[D_P_XI]
             value += hx * along + gx * slope
             d_x += dhx * along + dgx * slope
-            d_xx += (ehx * along / dxi + egx * slope) / dxi  # as in _bicubic_xi
+            d_xx += (ehx * along / dxi + egx * slope) / dxi
             d_xxx += thx * along + tgx * slope
             d_p += hx * along_p + gx * slope_p
             d_px += dhx * along_p + dgx * slope_p
@@ -350,17 +323,8 @@ def density_h_derivatives_at(
     tables: PropertyTables, sat: SaturationPoint, p: float, h: float
 ) -> tuple[float, float, float]:
     """:func:`density_h_derivatives` given ``sat``, the :func:`saturation_point` of ``p``."""
-    h_l, h_v, rho_l, rho_v = sat.h_l, sat.h_v, sat.rho_l, sat.rho_v
-    if not (sat.inside and h >= sat.h_min and h <= sat.h_max):
-        return NAN, NAN, NAN
-    if h < h_l or h > h_v:
-        table, ip, jx, dp, dxi, tp, rx, w, _ = _single_phase(tables, sat, p, h)
-        rho, rho_xi, rho_xixi = _bicubic_xi(table, PROP_RHO, ip, jx, dp, dxi, tp, rx)
-        return rho, rho_xi / w, rho_xixi / (w * w)
-    v_h = (1.0 / rho_v - 1.0 / rho_l) / (h_v - h_l)
-    rho = 1.0 / (1.0 / rho_l + (h - h_l) * v_h)
-    drho_dh = -rho * rho * v_h
-    return rho, drho_dh, 2.0 * drho_dh * drho_dh / rho
+    rho, drho_dh, curvature, _, _, _ = density_h_derivatives_along(tables, sat, p, h, 0.0)
+    return rho, drho_dh, curvature
 
 
 @njit(cache=True)
