@@ -148,8 +148,8 @@ def test_solvers_agree_on_the_fig4_profile_at_nominal():
 @pytest.mark.slow
 def test_solvers_agree_over_box_draws():
     """50 draws, 1060 s: both solve the same draws; all draws but one agree to 4 % of each
-    output's largest magnitude, 90 % of them to 0.1 %. (Measured: median 1.0e-4, 90th
-    percentile 3.6e-4, second worst 9.5e-4.)"""
+    output's largest magnitude, 90 % of them to 0.1 %. (Measured: median 1.5e-4, 90th
+    percentile 3.6e-4, second worst 2.7e-3.)"""
     unit = load_unit()
     simulators = [
         VCCSimulator(unit, t_window=(0.0, 1060.0), solver=method, max_wall_time=600.0)
