@@ -193,6 +193,22 @@ def _advance(function, memory, vector, reached, targets, first, last, out):
     return last, flag
 
 
+_ADVANCE_TYPES = (
+    *(types.int64,) * 4,
+    types.float64[::1],
+    types.int64,
+    types.int64,
+    types.float64[:, ::1],
+)
+"""The argument types :meth:`Cvode.advance_through` passes to the compiled output loop."""
+
+
+def compile_output_loop() -> None:
+    """Compile (or load from the cache) the output loop for the types the driver passes, so that
+    no simulation's wall clock counts it (see :mod:`pymc_vcc.physics.warmup`)."""
+    _advance.compile(_ADVANCE_TYPES)
+
+
 _MEANINGS = {
     "CV_TOO_MUCH_WORK": "too many steps before the next output time",
     "CV_TOO_CLOSE": "output time too close to the start",
@@ -228,6 +244,9 @@ class Callbacks:
 class Cvode:
     """One CVODE instance (BDF, dense direct linear solver, the model's Jacobian) over ``n``
     states, freed with this object."""
+
+    CHUNK = 64
+    """Output times integrated by one compiled call between two looks at the wall clock."""
 
     def __init__(self, callbacks: Callbacks, n: int, rtol: float, atol: np.ndarray) -> None:
         lib = self._lib = library()
@@ -285,9 +304,6 @@ class Cvode:
     def t(self) -> float:
         """The time reached, s."""
         return float(self._t[0])
-
-    CHUNK = 64
-    """Output times integrated by one compiled call between two looks at the wall clock."""
 
     def advance_through(
         self, targets: np.ndarray, out: np.ndarray, deadline: float

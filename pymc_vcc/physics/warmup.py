@@ -30,6 +30,7 @@ from pymc_vcc.physics import source_digest
 from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.cycles import CycleModel
 from pymc_vcc.physics.inputs import INPUT_IDS, constant_inputs, input_segments
+from pymc_vcc.physics.sundials import compile_output_loop
 from pymc_vcc.physics.unit import Unit
 
 ANNOUNCE_AFTER_SECONDS = 2.0
@@ -117,6 +118,7 @@ def _run_kernels(unit: Unit) -> None:
     model.evaluate(y, u, c, tables, dydt, np.empty(model.n_eval))
     model.jacobian(y, u, c, tables, dydt.copy())
     BoundCycle(model, y, u, c, tables).c_callbacks()  # CVODE's C callbacks
+    compile_output_loop()  # and its loop over the output times
     model.outputs_along(y[np.newaxis, :], u[np.newaxis, :], c, tables, False)
     xr.Dataset({"y": ("time", y)})  # xarray imports its array backends on first use (seconds)
 
