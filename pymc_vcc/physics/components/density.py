@@ -32,7 +32,8 @@ QUALITY_BAND = 0.1
 
 FILLET_ENDS = 9
 """Numbers describing one fillet at one pressure: p (the memo's key, Pa), the band's start
-enthalpy and width (J/kg), and ρ, ∂ρ/∂t, ∂²ρ/∂t² at both band edges, t = (h - start)/width."""
+enthalpy and width (J/kg), and ρ, ∂ρ/∂t, ∂²ρ/∂t² at both band edges, t = (h - start)/width.
+The memo's second row holds the derivative of each in p (the first of them dp/dp = 1)."""
 
 
 @njit(cache=True, error_model="numpy")
