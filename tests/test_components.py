@@ -15,7 +15,12 @@ from pymc_vcc.physics.components.compressor import (
     shell_loss,
     volumetric_efficiency,
 )
-from pymc_vcc.physics.components.density import QUALITY_BAND, cell_state, fillet_memo
+from pymc_vcc.physics.components.density import (
+    QUALITY_BAND,
+    cell_state,
+    cell_values,
+    fillet_memo,
+)
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature, fan_operating_point
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
@@ -354,6 +359,21 @@ def test_cell_state_memo_is_exact_across_cells_and_pressures(tables):
             assert cell_state(tables, saturation_point(tables, p), p, h, memo) == _cell(
                 tables, p, h
             )
+
+
+def test_cell_values_are_the_cell_state_without_its_slopes(tables):
+    """The outputs' and the charge's cheaper lookup gives bit for bit the T, ρ and x of the
+    full one, in and out of both bands and outside the tables, sharing a memo with it either
+    way round."""
+    memo = fillet_memo()
+    for p in (2.7e6, 1.0e6, 2.7e6, 1.0e6 * (1 + 1e-7), 4.6e6):
+        _, h_l, h_v, _, _ = saturation_state(tables, p)
+        sat = saturation_point(tables, p)
+        for x in (-0.6, -0.15, -0.05, 0.0, 0.04, 0.5, 0.93, 1.0, 1.06, 1.2, 1.5):
+            h = h_l + x * (h_v - h_l)
+            T, rho, _, _, quality = _cell(tables, p, h)
+            np.testing.assert_array_equal(cell_values(tables, sat, p, h, memo), (T, rho, quality))
+            np.testing.assert_array_equal(cell_state(tables, sat, p, h, memo)[1], rho)
 
 
 def _zone(tables, p, hs):

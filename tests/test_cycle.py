@@ -132,6 +132,33 @@ def test_jacobian_matches_central_differences(setup):
         assert np.max(np.abs(jac[:, j] - central)) < 1e-3 * scale
 
 
+def test_wall_columns_reach_only_their_row_and_zone(setup):
+    """The Jacobian shares one evaluation between the two coils' walls i: that is exact only
+    if a wall temperature moves nothing outside its own row and its zone (with rain on the
+    indoor coil, a charge error and an integral term, so every source is active)."""
+    unit, model, tables, c, y, inputs = setup
+    c = c.copy()
+    c[0]["controller"]["m0"] *= 1.01
+    y = y.copy()
+    y[-1] = 0.3
+    inputs = inputs.copy()
+    inputs[4] = 0.6
+    layout = model.layout(unit.discretisation.n_volumes)
+    f0, f, out = np.empty(y.size), np.empty(y.size), np.empty(model.n_eval)
+    model.evaluate(y, inputs, c, tables, f0, out)
+    jac = model.jacobian(y, inputs, c, tables, f0.copy())
+    for block, (p_index, cells) in (("Tw_cond", layout.zones[0]), ("Tw_evap", layout.zones[1])):
+        for j in range(layout[block].start, layout[block].stop):
+            step = 1e-7 * max(abs(y[j]), 1.0)
+            shifted = y.copy()
+            shifted[j] += step
+            model.evaluate(shifted, inputs, c, tables, f, out)
+            alone = (f - f0) / step
+            reached = np.flatnonzero(alone)
+            assert set(reached) <= {j, *range(p_index, p_index + cells + 1)}, (block, j)
+            np.testing.assert_allclose(jac[:, j], alone, rtol=1e-9, atol=0.0)
+
+
 def test_out_of_range_state_is_flagged_not_raised(setup):
     _, model, tables, c, y, inputs = setup
     y = y.copy()

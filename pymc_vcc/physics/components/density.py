@@ -25,6 +25,7 @@ from pymc_vcc.physics.refrigerant import (
     SaturationPoint,
     density_h_derivatives_along,
     state_at,
+    state_values_at,
 )
 
 QUALITY_BAND = 0.1
@@ -82,6 +83,37 @@ def _fillet_ends(
 
 
 @njit(cache=True, error_model="numpy")
+def _fillet_basis(t: float) -> tuple[float, float, float, float, float, float]:
+    """The quintic Hermite basis at t of ρ_a, ∂ρ/∂t_a, ∂²ρ/∂t²_a, ∂²ρ/∂t²_b, ∂ρ/∂t_b, ρ_b."""
+    t2 = t * t
+    t3 = t2 * t
+    t4 = t3 * t
+    t5 = t4 * t
+    return (
+        1.0 - 10.0 * t3 + 15.0 * t4 - 6.0 * t5,
+        t - 6.0 * t3 + 8.0 * t4 - 3.0 * t5,
+        0.5 * (t2 - 3.0 * t3 + 3.0 * t4 - t5),
+        0.5 * (t3 - 2.0 * t4 + t5),
+        -4.0 * t3 + 7.0 * t4 - 3.0 * t5,
+        10.0 * t3 - 15.0 * t4 + 6.0 * t5,
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def _fillet_sum(basis: tuple[float, float, float, float, float, float], ends: np.ndarray) -> float:
+    """The fillet's ρ (or, given the ends' p-slopes, its p-derivative at constant t)."""
+    b_rho_a, b_d_a, b_c_a, b_c_b, b_d_b, b_rho_b = basis
+    return (
+        b_rho_a * ends[3]
+        + b_d_a * ends[4]
+        + b_c_a * ends[5]
+        + b_c_b * ends[8]
+        + b_d_b * ends[7]
+        + b_rho_b * ends[6]
+    )
+
+
+@njit(cache=True, error_model="numpy")
 def _fillet(ends: np.ndarray, slopes: np.ndarray, h: float) -> tuple[float, float, float]:
     """(ρ, ∂ρ/∂h, ∂ρ/∂p) of the quintic Hermite fillet with these ends and p-slopes at
     enthalpy ``h``."""
@@ -90,22 +122,7 @@ def _fillet(ends: np.ndarray, slopes: np.ndarray, h: float) -> tuple[float, floa
     t2 = t * t
     t3 = t2 * t
     t4 = t3 * t
-    t5 = t4 * t
-    # the basis of rho_a, d_a, c_a, c_b, d_b, rho_b
-    b_rho_a = 1.0 - 10.0 * t3 + 15.0 * t4 - 6.0 * t5
-    b_d_a = t - 6.0 * t3 + 8.0 * t4 - 3.0 * t5
-    b_c_a = 0.5 * (t2 - 3.0 * t3 + 3.0 * t4 - t5)
-    b_c_b = 0.5 * (t3 - 2.0 * t4 + t5)
-    b_d_b = -4.0 * t3 + 7.0 * t4 - 3.0 * t5
-    b_rho_b = 10.0 * t3 - 15.0 * t4 + 6.0 * t5
-    rho = (
-        b_rho_a * ends[3]
-        + b_d_a * ends[4]
-        + b_c_a * ends[5]
-        + b_c_b * ends[8]
-        + b_d_b * ends[7]
-        + b_rho_b * ends[6]
-    )
+    basis = _fillet_basis(t)
     drho_dt = (
         (-30.0 * t2 + 60.0 * t3 - 30.0 * t4) * (ends[3] - ends[6])
         + (1.0 - 18.0 * t2 + 32.0 * t3 - 15.0 * t4) * ends[4]
@@ -115,16 +132,8 @@ def _fillet(ends: np.ndarray, slopes: np.ndarray, h: float) -> tuple[float, floa
     )
     # in p at constant h: the ends move, and t with the band
     t_p = -(slopes[1] + t * slopes[2]) / width
-    drho_dp = (
-        b_rho_a * slopes[3]
-        + b_d_a * slopes[4]
-        + b_c_a * slopes[5]
-        + b_c_b * slopes[8]
-        + b_d_b * slopes[7]
-        + b_rho_b * slopes[6]
-        + drho_dt * t_p
-    )
-    return rho, drho_dt / width, drho_dp
+    drho_dp = _fillet_sum(basis, slopes) + drho_dt * t_p
+    return _fillet_sum(basis, ends), drho_dt / width, drho_dp
 
 
 @njit(cache=True, error_model="numpy")
@@ -153,3 +162,19 @@ def cell_state(
         _fillet_ends(tables, sat, p, centre, QUALITY_BAND, ends, slopes)
     rho, drho_dh, drho_dp = _fillet(ends, slopes, h)
     return T, rho, drho_dp, drho_dh, x
+
+
+@njit(cache=True, error_model="numpy")
+def cell_values(
+    tables, sat: SaturationPoint, p: float, h: float, memo: np.ndarray
+) -> tuple[float, float, float]:
+    """(T K, ρ kg/m³, unclipped quality) of :func:`cell_state` without the derivatives, for
+    the outputs and the charge."""
+    T, rho, x = state_values_at(tables, sat, p, h)
+    centre = _band_centre(x, QUALITY_BAND)
+    if centre < 0.0:
+        return T, rho, x
+    ends, slopes = memo[int(centre), 0], memo[int(centre), 1]
+    if ends[0] != p:
+        _fillet_ends(tables, sat, p, centre, QUALITY_BAND, ends, slopes)
+    return T, _fillet_sum(_fillet_basis((h - ends[1]) / ends[2]), ends), x

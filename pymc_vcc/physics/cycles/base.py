@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 from scipy.optimize import brentq
 
-from pymc_vcc.physics.components.density import cell_state, fillet_memo
+from pymc_vcc.physics.components.density import cell_state, cell_values, fillet_memo
 from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
 
@@ -248,11 +248,12 @@ def place_charge(
 
 
 @njit(cache=True, error_model="numpy")
-def zone_cells(y, zones, first, last, tables, props, memo=None):
+def zone_cells(y, zones, first, last, tables, props, memo=None, rates=True):
     """Properties of cells ``first`` to ``last`` (cells numbered zone after zone; all of one
     zone, so they share its pressure's saturation point) into those columns of ``props``. A
     ``memo`` from :func:`fillet_memo` carries fillet ends over from earlier calls at the same
-    pressure."""
+    pressure. With ``rates`` False only T, ρ and x (the density's slopes NaN), which is all the
+    outputs and the charge need."""
     zone = 0
     k = first
     while k >= zones[zone, 1]:
@@ -265,7 +266,11 @@ def zone_cells(y, zones, first, last, tables, props, memo=None):
         memo = fillet_memo()
     for i in range(first, last + 1):
         h = y[p_index + 1 + k + i - first]
-        T, rho, drho_dp, drho_dh, x = cell_state(tables, sat, p, h, memo)
+        if rates:
+            T, rho, drho_dp, drho_dh, x = cell_state(tables, sat, p, h, memo)
+        else:
+            T, rho, x = cell_values(tables, sat, p, h, memo)
+            drho_dp = drho_dh = np.nan
         props[0, i] = T
         props[1, i] = rho
         props[2, i] = drho_dp
@@ -274,12 +279,12 @@ def zone_cells(y, zones, first, last, tables, props, memo=None):
 
 
 @njit(cache=True, error_model="numpy")
-def cell_properties(y, zones, tables, props):
-    """Fill ``props`` (shape (N_PROPERTIES, cells)) for every cell; False if a property left
-    the tables."""
+def cell_properties(y, zones, tables, props, rates=True):
+    """Fill ``props`` (shape (N_PROPERTIES, cells)) for every cell (``rates``: see
+    :func:`zone_cells`); False if a property left the tables."""
     first = 0
     for zone in range(zones.shape[0]):
-        zone_cells(y, zones, first, first + zones[zone, 1] - 1, tables, props)
+        zone_cells(y, zones, first, first + zones[zone, 1] - 1, tables, props, None, rates)
         first += zones[zone, 1]
     return bool(np.isfinite(props[1]).all())
 

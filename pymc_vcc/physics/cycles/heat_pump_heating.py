@@ -61,7 +61,7 @@ def total_mass(y, constants, tables):
     """Total refrigerant mass M(y), kg (NaN if a property left the tables)."""
     c = constants[0]
     props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
-    cell_properties(y, c.layout.zones, tables, props)
+    cell_properties(y, c.layout.zones, tables, props, False)
     return stored_mass(cell_volumes(c), props[1])
 
 

@@ -362,27 +362,49 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
 @njit(cache=True, error_model="numpy")
 def jacobian(y, u, constants, tables, f0):
     """Dense forward-difference Jacobian ∂f/∂y at ``y`` (``f0`` = f(y)); each column
-    re-evaluates only the cell properties its variable touches."""
+    re-evaluates only the cell properties its variable touches. The two coils' walls i share
+    one evaluation: a wall temperature reaches only its own row and its zone's (pressure and
+    cells), and the coils lie in different zones."""
     c = constants[0]
-    zones = c.layout.zones
-    jac = np.empty((y.size, y.size))
+    at = c.layout
+    zones = at.zones
+    n = at.h_liquid_line - at.h_cond
+    jac = np.zeros((y.size, y.size))
     props = np.empty((N_PROPERTIES, zones[:, 1].sum()))
     cell_properties(y, zones, tables, props)
     saved = props.copy()
     work = y.copy()
     dydt = np.empty(y.size)
     out = np.empty(N_EVAL)
-    n = c.layout.h_liquid_line - c.layout.h_cond
     memo = np.full((2 * n, MEMO_COLUMNS), np.nan)
     fillets = fillet_memo()  # enthalpy columns keep their zone's pressure and its fillet ends
     balances(y, u, c, tables, props, dydt, out, True, memo, True)  # the cells' heats at y
     for j in range(y.size):
+        if at.Tw_evap <= j < at.Tw_evap + n:
+            continue  # taken with the condenser's wall of the same index
         step = perturb(y, work, j, zones, tables, props, fillets)
-        balances(work, u, c, tables, props, dydt, out, True, memo, False)
-        for i in range(y.size):
-            jac[i, j] = (dydt[i] - f0[i]) / step
+        if at.Tw_cond <= j < at.Tw_cond + n:
+            partner = at.Tw_evap + j - at.Tw_cond
+            partner_step = perturb(y, work, partner, zones, tables, props, fillets)
+            balances(work, u, c, tables, props, dydt, out, True, memo, False)
+            _wall_column(jac, dydt, f0, j, zones[0], step)
+            _wall_column(jac, dydt, f0, partner, zones[1], partner_step)
+            restore(y, work, partner, zones, props, saved)
+        else:
+            balances(work, u, c, tables, props, dydt, out, True, memo, False)
+            for i in range(y.size):
+                jac[i, j] = (dydt[i] - f0[i]) / step
         restore(y, work, j, zones, props, saved)
     return jac
+
+
+@njit(cache=True, error_model="numpy")
+def _wall_column(jac, dydt, f0, j, zone, step):
+    """Column ``j`` of a wall temperature from a shared evaluation: its own row and the rows
+    of its coil's ``zone`` (pressure offset, cells); the rest stay zero."""
+    jac[j, j] = (dydt[j] - f0[j]) / step
+    for i in range(zone[0], zone[0] + zone[1] + 1):
+        jac[i, j] = (dydt[i] - f0[i]) / step
 
 
 @njit(cache=True, error_model="numpy")
@@ -395,7 +417,7 @@ def outputs_along(ys, us, constants, tables, rates):
     dydt = np.empty(ys.shape[1])
     out = np.empty(N_EVAL)
     for k in range(ys.shape[0]):
-        cell_properties(ys[k], c.layout.zones, tables, props)
+        cell_properties(ys[k], c.layout.zones, tables, props, rates)
         balances(ys[k], us[k], c, tables, props, dydt, out, rates)
         result[k] = out
     return result

@@ -16,7 +16,7 @@ import functools
 import numpy as np
 from numba import njit
 
-from pymc_vcc.physics.components.density import cell_state, fillet_memo
+from pymc_vcc.physics.components.density import cell_values, fillet_memo
 from pymc_vcc.physics.cycles.base import (
     Block,
     BlockKind,
@@ -62,12 +62,12 @@ def total_mass(y, constants, tables):
     mass = 0.0
     for i in range(n):
         h_c, h_e = y[at.h_cond + i], y[at.h_evap + i]
-        mass += c.condenser.cell_volume * cell_state(tables, sat_c, p_c, h_c, memo_c)[1]
-        mass += c.evaporator.cell_volume * cell_state(tables, sat_e, p_e, h_e, memo_e)[1]
+        mass += c.condenser.cell_volume * cell_values(tables, sat_c, p_c, h_c, memo_c)[1]
+        mass += c.evaporator.cell_volume * cell_values(tables, sat_e, p_e, h_e, memo_e)[1]
     h_liquid, h_vapor, h_tank = y[at.h_liquid_line], y[at.h_vapor_line], y[at.h_tank]
-    mass += c.liquid_line.volume * cell_state(tables, sat_c, p_c, h_liquid, memo_c)[1]
-    mass += c.vapor_line.volume * cell_state(tables, sat_e, p_e, h_vapor, memo_e)[1]
-    mass += c.tank.volume * cell_state(tables, sat_e, p_e, h_tank, memo_e)[1]
+    mass += c.liquid_line.volume * cell_values(tables, sat_c, p_c, h_liquid, memo_c)[1]
+    mass += c.vapor_line.volume * cell_values(tables, sat_e, p_e, h_vapor, memo_e)[1]
+    mass += c.tank.volume * cell_values(tables, sat_e, p_e, h_tank, memo_e)[1]
     return mass
 
 

@@ -28,6 +28,7 @@ from pymc_vcc.physics.refrigerant.kernels import (
     state,
     state_array,
     state_at,
+    state_values_at,
 )
 from pymc_vcc.physics.refrigerant.tables import FluidSpec, PropertyTables, TableResolution
 
@@ -55,4 +56,5 @@ __all__ = [
     "state",
     "state_array",
     "state_at",
+    "state_values_at",
 ]

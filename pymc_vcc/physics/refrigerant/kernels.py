@@ -157,6 +157,24 @@ def _bicubic(
 
 
 @njit(cache=True)
+def _bicubic_value(
+    table: np.ndarray, k: int, i: int, j: int, dp: float, dxi: float, t: float, r: float
+) -> float:
+    """Property k of a single-phase table: the value of :func:`_bicubic` alone."""
+    a00, a10, a01, a11 = _hermite_basis(t)[:4]
+    b00, b10, b01, b11 = _hermite_basis(r)[:4]
+    value = 0.0
+    for corner_p in range(2):
+        hp, gp = (a00, a10 * dp) if corner_p == 0 else (a01, a11 * dp)
+        for corner_xi in range(2):
+            hx, gx = (b00, b10 * dxi) if corner_xi == 0 else (b01, b11 * dxi)
+            node = table[i + corner_p, j + corner_xi, k]
+            f, f_p, f_x, f_px = node[VALUE], node[D_P], node[D_XI], node[D_P_XI]
+            value += hp * hx * f + gp * hx * f_p + hp * gx * f_x + gp * gx * f_px
+    return value
+
+
+@njit(cache=True)
 def _bicubic_jet(
     table: np.ndarray, k: int, i: int, j: int, dp: float, dxi: float, t: float, r: float
 ) -> tuple[float, float, float, float, float, float, float]:
@@ -306,6 +324,23 @@ def state_at(
     v_p = v_l_p + x * (v_v_p - v_l_p) + (v_v - v_l) * x_p
     v_h = (v_v - v_l) / dh
     return sat.T_b + x * (sat.T_d - sat.T_b), rho, -rho * rho * v_p, -rho * rho * v_h, x
+
+
+@njit(cache=True)
+def state_values_at(
+    tables: PropertyTables, sat: SaturationPoint, p: float, h: float
+) -> tuple[float, float, float]:
+    """(T, ρ, x) of :func:`state_at` without the derivatives, at about half the cost in
+    single phase."""
+    if not (sat.inside and h >= sat.h_min and h <= sat.h_max):
+        return NAN, NAN, NAN
+    x = (h - sat.h_l) / (sat.h_v - sat.h_l)
+    if h < sat.h_l or h > sat.h_v:
+        table, ip, jx, dp, dxi, tp, rx, _, _ = _single_phase(tables, sat, p, h)
+        T = _bicubic_value(table, PROP_T, ip, jx, dp, dxi, tp, rx)
+        return T, _bicubic_value(table, PROP_RHO, ip, jx, dp, dxi, tp, rx), x
+    rho = 1.0 / (1.0 / sat.rho_l + x * (1.0 / sat.rho_v - 1.0 / sat.rho_l))
+    return sat.T_b + x * (sat.T_d - sat.T_b), rho, x
 
 
 @njit(cache=True)
