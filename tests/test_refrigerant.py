@@ -23,6 +23,7 @@ from pymc_vcc.physics.refrigerant import (
     state,
     state_array,
     state_at,
+    state_values,
     state_values_at,
 )
 from pymc_vcc.physics.refrigerant.cache import CACHE_ENV, cache_directory, load_tables
@@ -369,6 +370,7 @@ def test_one_saturation_point_serves_every_lookup_at_its_pressure(fluids):
             np.testing.assert_array_equal(state_at(tables, point, p, h), state(tables, p, h))
             T, rho, _, _, x = state(tables, p, h)
             np.testing.assert_array_equal(state_values_at(tables, point, p, h), (T, rho, x))
+            np.testing.assert_array_equal(state_values(tables, p, h), (T, rho, x))
             np.testing.assert_array_equal(
                 density_h_derivatives_at(tables, point, p, h), density_h_derivatives(tables, p, h)
             )

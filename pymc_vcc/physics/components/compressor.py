@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from pymc_vcc.physics.components.smooth import smooth_max, smooth_pos, smooth_step, soft_cap
-from pymc_vcc.physics.refrigerant import entropy, h_from_ps, h_from_pT, state
+from pymc_vcc.physics.refrigerant import entropy, h_from_ps, h_from_pT, state_values
 
 COMPRESSOR_RECORD = np.dtype(
     [
@@ -135,7 +135,7 @@ def compressor(
         h_from_pT(tables, p_discharge, params.T_discharge_max) - h_isentropic, 2e3
     )
     h_adiabatic = h_isentropic + soft_cap(loss_in_gas / mass_flow, headroom)
-    T_adiabatic = state(tables, p_discharge, h_adiabatic)[0]
+    T_adiabatic = state_values(tables, p_discharge, h_adiabatic)[0]
     shell = shell_loss(params.shell_ua, params.cf_shell, T_adiabatic, T_ambient, loss_in_gas)
     h_discharge = h_isentropic + soft_cap((loss_in_gas - shell) / mass_flow, headroom)
     to_refrigerant = mass_flow * (h_discharge - h_suction)

@@ -67,7 +67,7 @@ from pymc_vcc.physics.cycles.split_unit import (
     split_unit_constants,
     suction_outlet,
 )
-from pymc_vcc.physics.refrigerant import saturation_point, state, state_at
+from pymc_vcc.physics.refrigerant import saturation_point, state, state_values, state_values_at
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import Unit
@@ -202,11 +202,11 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
     p_s, p_d, dp_cond, dp_evap, dp_vap = lumped_drops(
         flow, p_c, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, heating
     )
-    T_s, rho_s = state(tables, p_s, h_suc)[:2]
+    T_s, rho_s = state_values(tables, p_s, h_suc)[:2]
     m_comp, h_d, w_comp, w_ref, w_is, q_comp_amb = compressor(
         tables, p_s, h_suc, rho_s, p_d, speed, T_amb, comp
     )
-    T_d = state(tables, p_d, h_d)[0]
+    T_d = state_values(tables, p_d, h_d)[0]
     if not (math.isfinite(T_d) and math.isfinite(T_s)):
         out[:] = np.nan
         dydt[:] = np.nan
@@ -251,9 +251,9 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
         h_in_c, x_in_c, T_in_c = h_d, 0.0, 0.0
         if not heating:
             x_in_c = (h_d - point_c.h_l) / (point_c.h_v - point_c.h_l)
-            T_in_c = state_at(tables, point_c, p_c, h_d)[0]
+            T_in_c = state_values_at(tables, point_c, p_c, h_d)[0]
         x_in_e = (h_zc[nc - 1] - point_e.h_l) / (point_e.h_v - point_e.h_l)
-        T_in_e = state_at(tables, point_e, p_e, h_zc[nc - 1])[0]
+        T_in_e = state_values_at(tables, point_e, p_e, h_zc[nc - 1])[0]
         for i in range(n):
             k = first + i  # condenser cell i in the high-side zone
             tw = y[at.Tw_cond + i]

@@ -30,7 +30,7 @@ from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_e
 from pymc_vcc.physics.cycles.base import StateLayout, quality_enthalpy
 from pymc_vcc.physics.parameters import TABLE_III
 from pymc_vcc.physics.records import record_array
-from pymc_vcc.physics.refrigerant import saturation_state, state, state_at
+from pymc_vcc.physics.refrigerant import saturation_state, state, state_values_at
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import HeatExchangerGeometry, Unit
@@ -343,10 +343,10 @@ def coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, 
                 continue  # not strictly ahead of this stretch's start and before the outlet
             x_b = edge
             h_b = h_in + (edge - x_in) / (x - x_in) * (h - h_in)
-            T_b = state_at(tables, sat, p, h_b)[0]
+            T_b = state_values_at(tables, sat, p, h_b)[0]
         else:
             h_b, x_b, T_b = h, x, T
-        T_mid = state_at(tables, sat, p, 0.5 * (h_a + h_b))[0]
+        T_mid = state_values_at(tables, sat, p, 0.5 * (h_a + h_b))[0]
         weight = (h_b - h_a) / (h - h_in) if h != h_in else 1.0
         total += weight * cell_heat(
             T_wall,

@@ -28,6 +28,7 @@ from pymc_vcc.physics.refrigerant.kernels import (
     state,
     state_array,
     state_at,
+    state_values,
     state_values_at,
 )
 from pymc_vcc.physics.refrigerant.tables import FluidSpec, PropertyTables, TableResolution
@@ -56,5 +57,6 @@ __all__ = [
     "state",
     "state_array",
     "state_at",
+    "state_values",
     "state_values_at",
 ]

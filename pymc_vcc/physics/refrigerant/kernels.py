@@ -327,6 +327,12 @@ def state_at(
 
 
 @njit(cache=True)
+def state_values(tables: PropertyTables, p: float, h: float) -> tuple[float, float, float]:
+    """(T, ρ, x) at (p, h): :func:`state` without the derivatives."""
+    return state_values_at(tables, saturation_point(tables, p), p, h)
+
+
+@njit(cache=True)
 def state_values_at(
     tables: PropertyTables, sat: SaturationPoint, p: float, h: float
 ) -> tuple[float, float, float]:
