@@ -154,7 +154,8 @@ def _compress(tables, cf_vol, cf_pow, cf_pref, cf_shell, t_max=430.0):
     params = _compressor(
         cf_vol=cf_vol, cf_pow=cf_pow, cf_pref=cf_pref, cf_shell=cf_shell, T_discharge_max=t_max
     )
-    return h_s, compressor(tables, p_s, h_s, rho_s, p_d, 55.0, 308.15, params)
+    suction, discharge = saturation_point(tables, p_s), saturation_point(tables, p_d)
+    return h_s, compressor(tables, p_s, suction, h_s, rho_s, p_d, discharge, 55.0, 308.15, params)
 
 
 def test_compressor_by_hand(tables):

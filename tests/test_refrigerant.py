@@ -14,8 +14,11 @@ from pymc_vcc.physics.refrigerant import (
     density_h_derivatives_along,
     density_h_derivatives_at,
     entropy,
+    entropy_at,
     h_from_ps,
+    h_from_ps_at,
     h_from_pT,
+    h_from_pT_at,
     load_refrigerant,
     p_sat_from_T,
     saturation_point,
@@ -371,6 +374,14 @@ def test_one_saturation_point_serves_every_lookup_at_its_pressure(fluids):
             T, rho, _, _, x = state(tables, p, h)
             np.testing.assert_array_equal(state_values_at(tables, point, p, h), (T, rho, x))
             np.testing.assert_array_equal(state_values(tables, p, h), (T, rho, x))
+            s = entropy(tables, p, h)
+            np.testing.assert_array_equal(entropy_at(tables, point, p, h), s)
+            np.testing.assert_array_equal(
+                h_from_ps_at(tables, point, p, s), h_from_ps(tables, p, s)
+            )
+            np.testing.assert_array_equal(
+                h_from_pT_at(tables, point, p, T), h_from_pT(tables, p, T)
+            )
             np.testing.assert_array_equal(
                 density_h_derivatives_at(tables, point, p, h), density_h_derivatives(tables, p, h)
             )

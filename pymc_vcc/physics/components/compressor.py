@@ -29,7 +29,13 @@ import numpy as np
 from numba import njit
 
 from pymc_vcc.physics.components.smooth import smooth_max, smooth_pos, smooth_step, soft_cap
-from pymc_vcc.physics.refrigerant import entropy, h_from_ps, h_from_pT, state_values
+from pymc_vcc.physics.refrigerant import (
+    SaturationPoint,
+    entropy_at,
+    h_from_ps_at,
+    h_from_pT_at,
+    state_values_at,
+)
 
 COMPRESSOR_RECORD = np.dtype(
     [
@@ -103,15 +109,19 @@ def protection_speed_factor(pressure: float, p_start: float, p_stop: float) -> f
 def compressor(
     tables,
     p_suction: float,
+    suction: SaturationPoint,
     h_suction: float,
     rho_suction: float,
     p_discharge: float,
+    discharge: SaturationPoint,
     speed: float,
     T_ambient: float,
     params,
 ) -> tuple[float, float, float, float, float, float]:
     """(ṁ kg/s, discharge enthalpy J/kg, electrical power W, net power to the refrigerant W,
-    isentropic power W, heat to the ambient W) — see the module docstring.
+    isentropic power W, heat to the ambient W) — see the module docstring. ``suction`` and
+    ``discharge`` are the :func:`~pymc_vcc.physics.refrigerant.saturation_point` of the two
+    pressures.
 
     ``params`` is a :data:`COMPRESSOR_RECORD`; its ``loss_share`` is φ₀, the nominal share of
     the losses heating the refrigerant. The discharge enthalpy's excess over the isentropic one
@@ -123,8 +133,10 @@ def compressor(
         p_discharge / p_suction, params.clearance, params.exponent, params.cf_vol
     )
     mass_flow = compressor_mass_flow(rho_suction, speed, params.displacement, eta_vol)
-    s_suction = entropy(tables, p_suction, h_suction)
-    dh_isentropic = smooth_pos(h_from_ps(tables, p_discharge, s_suction) - h_suction, 100.0)
+    s_suction = entropy_at(tables, suction, p_suction, h_suction)
+    dh_isentropic = smooth_pos(
+        h_from_ps_at(tables, discharge, p_discharge, s_suction) - h_suction, 100.0
+    )
     h_isentropic = h_suction + dh_isentropic
     work_isentropic = mass_flow * dh_isentropic
     power = electrical_power(work_isentropic, params.isentropic_efficiency, params.cf_pow)
@@ -132,10 +144,10 @@ def compressor(
         power - work_isentropic
     )
     headroom = smooth_pos(
-        h_from_pT(tables, p_discharge, params.T_discharge_max) - h_isentropic, 2e3
+        h_from_pT_at(tables, discharge, p_discharge, params.T_discharge_max) - h_isentropic, 2e3
     )
     h_adiabatic = h_isentropic + soft_cap(loss_in_gas / mass_flow, headroom)
-    T_adiabatic = state_values(tables, p_discharge, h_adiabatic)[0]
+    T_adiabatic = state_values_at(tables, discharge, p_discharge, h_adiabatic)[0]
     shell = shell_loss(params.shell_ua, params.cf_shell, T_adiabatic, T_ambient, loss_in_gas)
     h_discharge = h_isentropic + soft_cap((loss_in_gas - shell) / mass_flow, headroom)
     to_refrigerant = mass_flow * (h_discharge - h_suction)

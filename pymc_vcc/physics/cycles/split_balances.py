@@ -67,7 +67,7 @@ from pymc_vcc.physics.cycles.split_unit import (
     split_unit_constants,
     suction_outlet,
 )
-from pymc_vcc.physics.refrigerant import saturation_point, state, state_values, state_values_at
+from pymc_vcc.physics.refrigerant import saturation_point, state_at, state_values_at
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.unit import Unit
@@ -182,8 +182,10 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
     rho_friction_e = coil_friction_density(rho_e, n)
 
     # ---- suction tank (bleed), pressure drops at the compressor's own flow, compressor
-    h_suc, level = suction_outlet(tables, p_e, h_ze[ne - 1], rho_e[ne - 1], c)
-    outlet = state(tables, p_e, h_suc)
+    point_c = saturation_point(tables, p_c)
+    point_e = saturation_point(tables, p_e)
+    h_suc, level = suction_outlet(point_e, h_ze[ne - 1], rho_e[ne - 1], c)
+    outlet = state_at(tables, point_e, p_e, h_suc)
     rho_out = outlet[1]
     rho_vapor_line = rho_c[0] if heating else rho_out
     speed = speed * protection_speed_factor(p_c, comp.p_protection_start, comp.p_protection_stop)
@@ -202,11 +204,13 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
     p_s, p_d, dp_cond, dp_evap, dp_vap = lumped_drops(
         flow, p_c, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, heating
     )
-    T_s, rho_s = state_values(tables, p_s, h_suc)[:2]
+    point_s = saturation_point(tables, p_s)
+    point_d = saturation_point(tables, p_d)
+    T_s, rho_s = state_values_at(tables, point_s, p_s, h_suc)[:2]
     m_comp, h_d, w_comp, w_ref, w_is, q_comp_amb = compressor(
-        tables, p_s, h_suc, rho_s, p_d, speed, T_amb, comp
+        tables, p_s, point_s, h_suc, rho_s, p_d, point_d, speed, T_amb, comp
     )
-    T_d = state_values(tables, p_d, h_d)[0]
+    T_d = state_values_at(tables, point_d, p_d, h_d)[0]
     if not (math.isfinite(T_d) and math.isfinite(T_s)):
         out[:] = np.nan
         dydt[:] = np.nan
@@ -245,8 +249,6 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
         scale_e = flow_scale(abs(m_valve) / evap.nominal_mass_flow)
         air_c = air_effectiveness(cond.air_capacity, cond.htc_air, cond.air_area)
         air_e = air_effectiveness(evap.air_capacity, evap.htc_air, evap.air_area)
-        point_c = saturation_point(tables, p_c)
-        point_e = saturation_point(tables, p_e)
         # what enters each coil: the discharge gas (or the hot gas line), the liquid line
         h_in_c, x_in_c, T_in_c = h_d, 0.0, 0.0
         if not heating:

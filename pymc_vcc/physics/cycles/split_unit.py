@@ -251,13 +251,13 @@ def _coil(
 
 
 @njit(cache=True, error_model="numpy")
-def suction_outlet(tables, p_e, h_tank, rho_tank, c):
+def suction_outlet(sat_e, h_tank, rho_tank, c):
     """(enthalpy leaving the suction tank J/kg, its liquid level -): vapour carrying the bleed
-    liquid, the more the fuller the tank."""
-    sat = saturation_state(tables, p_e)
-    level = liquid_level(rho_tank, sat[3], sat[4])
+    liquid, the more the fuller the tank; ``sat_e`` is the
+    :func:`~pymc_vcc.physics.refrigerant.saturation_point` of the tank's pressure."""
+    level = liquid_level(rho_tank, sat_e.rho_l, sat_e.rho_v)
     h_out = tank_outlet_enthalpy(
-        h_tank, sat[1], sat[2], level, c.tank.bleed_fraction_full, TANK_WIDTH
+        h_tank, sat_e.h_l, sat_e.h_v, level, c.tank.bleed_fraction_full, TANK_WIDTH
     )
     return h_out, level
 

@@ -437,14 +437,18 @@ def enthalpy_bounds(tables: PropertyTables, p: float) -> tuple[float, float]:
 @njit(cache=True)
 def entropy(tables: PropertyTables, p: float, h: float) -> float:
     """Specific entropy at (p, h), J/(kg K); NaN outside the tables."""
-    sat = saturation_point(tables, p)
+    return entropy_at(tables, saturation_point(tables, p), p, h)
+
+
+@njit(cache=True)
+def entropy_at(tables: PropertyTables, sat: SaturationPoint, p: float, h: float) -> float:
+    """:func:`entropy` given ``sat``, the :func:`saturation_point` of ``p``."""
     i, width, t, h_l, h_v = sat.interval, sat.width, sat.t, sat.h_l, sat.h_v
     if not (sat.inside and h >= sat.h_min and h <= sat.h_max):
         return NAN
     if h < h_l or h > h_v:
         table, ip, jx, dp, dxi, tp, rx, _, _ = _single_phase(tables, sat, p, h)
-        s, _, _ = _bicubic(table, PROP_S, ip, jx, dp, dxi, tp, rx)
-        return s
+        return _bicubic_value(table, PROP_S, ip, jx, dp, dxi, tp, rx)
     s_l, _ = _sat_curve(tables, S_LIQ, i, width, t)
     s_v, _ = _sat_curve(tables, S_VAP, i, width, t)
     return s_l + (h - h_l) / (h_v - h_l) * (s_v - s_l)
@@ -522,32 +526,30 @@ def _invert_region(tables: PropertyTables, p: float, k: int, target: float, liqu
 
 
 @njit(cache=True)
-def _h_from_property(tables: PropertyTables, p: float, k: int, target: float) -> float:
-    """Enthalpy at p where property k (T or s, both increasing with h) equals target; NaN if none.
+def _h_from_property(
+    tables: PropertyTables, sat: SaturationPoint, p: float, k: int, target: float
+) -> float:
+    """Enthalpy at p (saturation point ``sat``) where property k (T or s, both increasing with
+    h) equals target; NaN if none.
 
     Between the bubble and dew values (two-phase) the enthalpy follows the lever rule, which is
     how HEOS spreads CoolProp's pseudo-pure temperature glide and the entropy across the dome.
     """
-    if not _in_range(tables, p):
+    if not sat.inside:
         return NAN
-    i, width, t = _sat_locate(tables, p)
     if k == PROP_T:
-        low, _ = _sat_curve(tables, T_BUBBLE, i, width, t)
-        high, _ = _sat_curve(tables, T_DEW, i, width, t)
+        low, high = sat.T_b, sat.T_d
     else:
-        low, _ = _sat_curve(tables, S_LIQ, i, width, t)
-        high, _ = _sat_curve(tables, S_VAP, i, width, t)
-    h_l, _ = _sat_curve(tables, H_LIQ, i, width, t)
-    h_v, _ = _sat_curve(tables, H_VAP, i, width, t)
+        low, _ = _sat_curve(tables, S_LIQ, sat.interval, sat.width, sat.t)
+        high, _ = _sat_curve(tables, S_VAP, sat.interval, sat.width, sat.t)
+    h_l, h_v = sat.h_l, sat.h_v
     if target < low:
-        h_min, _ = _sat_curve(tables, H_MIN, i, width, t)
-        return h_min + _invert_region(tables, p, k, target, True) * (h_l - h_min)
+        return sat.h_min + _invert_region(tables, p, k, target, True) * (h_l - sat.h_min)
     if target < high:
         return h_l + (target - low) / (high - low) * (h_v - h_l)
     if target == high:
         return h_v
-    h_max, _ = _sat_curve(tables, H_MAX, i, width, t)
-    return h_v + _invert_region(tables, p, k, target, False) * (h_max - h_v)
+    return h_v + _invert_region(tables, p, k, target, False) * (sat.h_max - h_v)
 
 
 @njit(cache=True)
@@ -558,13 +560,25 @@ def h_from_pT(tables: PropertyTables, p: float, T: float) -> float:
     it gives the two-phase state at that temperature. NaN outside [T_min, T_max] or the
     pressure range.
     """
-    return _h_from_property(tables, p, PROP_T, T)
+    return h_from_pT_at(tables, saturation_point(tables, p), p, T)
+
+
+@njit(cache=True)
+def h_from_pT_at(tables: PropertyTables, sat: SaturationPoint, p: float, T: float) -> float:
+    """:func:`h_from_pT` given ``sat``, the :func:`saturation_point` of ``p``."""
+    return _h_from_property(tables, sat, p, PROP_T, T)
 
 
 @njit(cache=True)
 def h_from_ps(tables: PropertyTables, p: float, s: float) -> float:
     """Enthalpy at (p, s), J/kg (e.g. the isentropic compressor outlet); NaN outside the tables."""
-    return _h_from_property(tables, p, PROP_S, s)
+    return h_from_ps_at(tables, saturation_point(tables, p), p, s)
+
+
+@njit(cache=True)
+def h_from_ps_at(tables: PropertyTables, sat: SaturationPoint, p: float, s: float) -> float:
+    """:func:`h_from_ps` given ``sat``, the :func:`saturation_point` of ``p``."""
+    return _h_from_property(tables, sat, p, PROP_S, s)
 
 
 @njit(cache=True)
