@@ -11,6 +11,7 @@ parameter ids, invalid inputs) do raise, before anything runs.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import time
 from collections.abc import Mapping, Sequence
@@ -48,9 +49,11 @@ def _builtin_unit() -> Unit:
 
 
 _THREADPOOLS = ThreadpoolController()
-"""BLAS runs single-threaded inside a simulation: its small LU factorisations only lose by
+"""BLAS runs single-threaded inside a Radau simulation: its small LU factorisations only lose by
 threading (five times slower at 126 states on a busy 2-core machine), and samplers run one
-simulation per core anyway."""
+simulation per core anyway. CVODE does not call BLAS, and is not wrapped: setting OpenBLAS's
+threads back after each run woke its threads in a forked worker, where they spun (a CVODE run
+took 2.3 times its wall time in CPU)."""
 
 
 def _empty_result(model: CycleModel, times: np.ndarray, diagnostics: bool) -> dict:
@@ -145,7 +148,12 @@ def simulate(
         y = None
         failure = Failure(FailureKind.INITIAL_STATE, f"initial state: {error}")
     if y is not None:
-        with _THREADPOOLS.limit(limits=1, user_api="blas"):
+        blas = (
+            _THREADPOOLS.limit(limits=1, user_api="blas")
+            if stepper.calls_blas
+            else contextlib.nullcontext()
+        )
+        with blas:
             failure = _integrate(
                 model, y, c, tables, edges, held, times, on_grid, stepper, started + limit
             )

@@ -100,6 +100,9 @@ class SegmentSolver(Protocol):
     """What both solvers offer the simulation driver."""
 
     counters: Counters
+    calls_blas: bool
+    """Whether its linear algebra goes through BLAS and LAPACK from Python (the driver then
+    keeps BLAS on one thread for the run)."""
 
     def integrate(
         self,
@@ -144,6 +147,8 @@ class _WallClockLimit(Exception):
 
 class RadauSolver:
     """scipy's Radau IIA (order 5), one step at a time, with direct LAPACK LU calls."""
+
+    calls_blas = True
 
     def __init__(self, rtol: float, atol: np.ndarray, max_step: float, wall_limit: float):
         self.rtol, self.atol, self.max_step, self.wall_limit = rtol, atol, max_step, wall_limit
@@ -251,6 +256,8 @@ class CvodeSolver:
     :meth:`~pymc_vcc.physics.sundials.Cvode.advance_through`), and the wall clock is read
     between its chunks of output times; the states are checked finite once per segment.
     """
+
+    calls_blas = False  # SUNDIALS' own dense LU
 
     MAX_STEPS = 20_000
     """Internal steps allowed between two output times (a run that needs more is stuck)."""

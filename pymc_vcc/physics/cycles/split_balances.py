@@ -182,7 +182,6 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
     rho_friction_e = coil_friction_density(rho_e, n)
 
     # ---- suction tank (bleed), pressure drops at the compressor's own flow, compressor
-    point_c = saturation_point(tables, p_c)
     point_e = saturation_point(tables, p_e)
     h_suc, level = suction_outlet(point_e, h_ze[ne - 1], rho_e[ne - 1], c)
     outlet = state_at(tables, point_e, p_e, h_suc)
@@ -249,6 +248,7 @@ def balances(y, u, c, tables, props, dydt, out, rates=True, memo=None, remember=
         scale_e = flow_scale(abs(m_valve) / evap.nominal_mass_flow)
         air_c = air_effectiveness(cond.air_capacity, cond.htc_air, cond.air_area)
         air_e = air_effectiveness(evap.air_capacity, evap.htc_air, evap.air_area)
+        point_c = saturation_point(tables, p_c)
         # what enters each coil: the discharge gas (or the hot gas line), the liquid line
         h_in_c, x_in_c, T_in_c = h_d, 0.0, 0.0
         if not heating:
