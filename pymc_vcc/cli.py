@@ -119,6 +119,7 @@ def _estimate(args: argparse.Namespace) -> int:
         kernel_steps=args.kernel_steps,
         kernel=args.kernel,
         fit_starts=args.fit_starts,
+        refine=args.refine,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations "
@@ -433,6 +434,15 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         help="likelihood: temper from the Laplace approximations of least-squares fits from "
         "this many starts instead of from the prior (default 0: from the prior)",
+    )
+    estimate.add_argument(
+        "--refine",
+        type=int,
+        default=0,
+        metavar="SIMULATIONS",
+        help="smc: after each dataset's SMC-ABC, this many new simulations around its posterior "
+        "for regression-adjusted ABC (learnt summaries, local-linear adjustment), whose "
+        "posterior replaces it (default 0: none)",
     )
     estimate.set_defaults(handler=_estimate)
 

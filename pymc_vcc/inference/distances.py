@@ -113,7 +113,7 @@ def ks_distance(
     return float(np.mean(statistics))
 
 
-def _output_scales(obs: np.ndarray) -> np.ndarray:
+def output_scales(obs: np.ndarray) -> np.ndarray:
     """Each observed output's spread over time (n_outputs, 1); a tiny floor if it is flat."""
     spread = obs.std(axis=1, keepdims=True)
     floor = 1e-6 * np.abs(obs).mean(axis=1, keepdims=True)
@@ -137,7 +137,16 @@ def wasserstein_distances(sims: np.ndarray, obs: np.ndarray) -> np.ndarray:
         gaps = np.array(
             [[wasserstein_distance(row, obs[j]) for j, row in enumerate(sim)] for sim in sims]
         )
-    return (gaps / _output_scales(obs).T).mean(axis=1)
+    return (gaps / output_scales(obs).T).mean(axis=1)
+
+
+def window_means(values: np.ndarray, window: int) -> np.ndarray:
+    """Means of consecutive ``window``-sample blocks along the last (time) axis; a partial
+    block at the end is dropped. (..., n) → (..., n // window)."""
+    usable = values.shape[-1] - values.shape[-1] % window
+    if usable == 0:
+        raise ValueError(f"window={window} exceeds the {values.shape[-1]} observed time points")
+    return values[..., :usable].reshape(*values.shape[:-1], -1, window).mean(axis=-1)
 
 
 def windowed_distances(sims: np.ndarray, obs: np.ndarray, window: int = 10) -> np.ndarray:
@@ -156,14 +165,7 @@ def windowed_distances(sims: np.ndarray, obs: np.ndarray, window: int = 10) -> n
         )
     _require_finite(sims, "simulated outputs")
     _require_finite(obs, "observed outputs")
-    usable = obs.shape[1] - obs.shape[1] % window
-    if usable == 0:
-        raise ValueError(f"window={window} exceeds the {obs.shape[1]} observed time points")
-
-    def means(values: np.ndarray) -> np.ndarray:
-        return values[..., :usable].reshape(*values.shape[:-1], -1, window).mean(axis=-1)
-
-    gaps = (means(sims) - means(obs)[np.newaxis]) / _output_scales(obs)[np.newaxis]
+    gaps = (window_means(sims, window) - window_means(obs, window)) / output_scales(obs)
     return np.sqrt((gaps**2).mean(axis=2)).mean(axis=1)
 
 

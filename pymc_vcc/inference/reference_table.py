@@ -234,17 +234,118 @@ def simulate_table(
         "time_limit": time_limit,
         "spawn_key": list(spawn_key),
     }
-    store = None
-    if checkpoint is not None:
-        store = _TableCheckpoint(Path(checkpoint), settings, entropy)
-        entropy = store.entropy
-    elif entropy is None:
-        entropy = int(np.random.SeedSequence().entropy)
+    store, entropy = _open_checkpoint(checkpoint, settings, entropy)
     sizes = {PILOT: int(n_pilot), MAIN: int(n_main)}
     thetas = {
         phase: prior.sample(size, simulation_rng(entropy, spawn_key, prior_stream(phase), 0))
         for phase, size in sizes.items()
     }
+    return _simulate_rows(
+        simulator,
+        data,
+        tuple(prior.names),
+        thetas,
+        store,
+        (entropy, spawn_key),
+        executor=executor,
+        n_workers=n_workers,
+        time_limit=time_limit,
+        progress=progress,
+    )
+
+
+def simulate_draws(
+    simulator: Simulator,
+    names: tuple[str, ...],
+    thetas: np.ndarray,
+    observed: OutputData,
+    *,
+    executor: Executor | ExecutorKind = "processes",
+    n_workers: int | None = None,
+    checkpoint: str | Path | None = None,
+    seed: int | np.random.SeedSequence | None = None,
+    time_limit: float | None = None,
+    progress: bool | None = None,
+) -> ReferenceTable:
+    """Noise-free simulations of given parameter sets: a table with only a main phase.
+
+    Args:
+        simulator: a deterministic ``simulator(theta, rng)``, picklable for parallel executors.
+        names: the parameters, the columns of ``thetas`` (model parameters only).
+        thetas: the parameter sets, (n, len(names)), in SI units.
+        observed: any dataset on the data's grid: selects and orders the outputs stored.
+        executor, n_workers, time_limit, progress: as for :func:`simulate_table`.
+        checkpoint: folder persisting each finished chunk; a run started again with the same
+            arguments simulates only the rest.
+        seed: integer or SeedSequence of the simulations' random streams.
+    """
+    thetas = np.asarray(thetas, dtype=float)
+    if thetas.ndim != 2 or thetas.shape[1] != len(names) or thetas.shape[0] == 0:
+        raise ValueError(
+            f"thetas must have shape (n >= 1, {len(names)}) for parameters {list(names)}, got "
+            f"{thetas.shape}"
+        )
+    info = check_simulator(simulator)
+    data = prepare_observed_for(info, observed, None)
+    check_prior_support(
+        info.support,
+        {
+            name: (float(column.min()), float(column.max()))
+            for name, column in zip(names, thetas.T, strict=True)
+        },
+    )
+    entropy, spawn_key = split_seed(seed)
+    settings = {
+        "outputs": list(data.names),
+        "n_time": int(data.values.shape[1]),
+        "parameters": list(names),
+        "draws_digest": array_digest(thetas),
+        "simulator": describe_callable(simulator),
+        "time_limit": time_limit,
+        "spawn_key": list(spawn_key),
+    }
+    store, entropy = _open_checkpoint(checkpoint, settings, entropy)
+    return _simulate_rows(
+        simulator,
+        data,
+        tuple(names),
+        {MAIN: thetas},
+        store,
+        (entropy, spawn_key),
+        executor=executor,
+        n_workers=n_workers,
+        time_limit=time_limit,
+        progress=progress,
+    )
+
+
+def _open_checkpoint(
+    checkpoint: str | Path | None, settings: dict, entropy: int | None
+) -> tuple[_TableCheckpoint | None, int]:
+    """The checkpoint folder (None without one) and the entropy of the draws: the stored one
+    when resuming, else ``entropy`` or a fresh one."""
+    if checkpoint is not None:
+        store = _TableCheckpoint(Path(checkpoint), settings, entropy)
+        return store, store.entropy
+    return None, int(np.random.SeedSequence().entropy) if entropy is None else entropy
+
+
+def _simulate_rows(
+    simulator: Simulator,
+    data: ObservedData,
+    names: tuple[str, ...],
+    thetas: dict[int, np.ndarray],
+    store: _TableCheckpoint | None,
+    seed: tuple[int, tuple[int, ...]],
+    *,
+    executor: Executor | ExecutorKind,
+    n_workers: int | None,
+    time_limit: float | None,
+    progress: bool | None,
+) -> ReferenceTable:
+    """Simulate every row of ``thetas`` (phase -> draws) not yet in ``store``; the table."""
+    entropy, spawn_key = seed
+    sizes = {phase: rows.shape[0] for phase, rows in thetas.items()}
     shape = data.values.shape
     values = {phase: np.full((size, *shape), np.nan) for phase, size in sizes.items()}
     status = {phase: np.full(size, "", dtype=object) for phase, size in sizes.items()}
@@ -262,7 +363,7 @@ def simulate_table(
 
     for row in store.load() if store is not None else []:
         record(*row)
-    task = _TableTask(simulator, data, tuple(prior.names), entropy, spawn_key, time_limit)
+    task = _TableTask(simulator, data, names, entropy, spawn_key, time_limit)
     with (
         executor_scope(executor, n_workers) as pool,
         PhaseProgress(progress_enabled(progress)) as bar,
@@ -285,7 +386,7 @@ def simulate_table(
                 done = int((status[phase] != "").sum())
                 bar.update(done, 0, int(((status[phase] != "") & (status[phase] != OK)).sum()))
     return ReferenceTable(
-        tuple(prior.names),
+        names,
         tuple(data.names),
         thetas,
         values,

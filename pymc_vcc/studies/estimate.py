@@ -16,7 +16,9 @@ simulated in parallel (:func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`), whi
 towards the posterior instead of discarding 95 % of its simulations, or the same tempered SMC
 on the exact likelihood of noisy data under known sensor noise (``"likelihood"``). Both ABC
 samplers use the paper's KS distance unless ``distance`` names another (Wasserstein-1, or the
-time-aligned windowed distance).
+time-aligned windowed distance). With ``refine``, each SMC-ABC posterior is followed by
+regression-adjusted ABC on that many new simulations around it
+(:mod:`~pymc_vcc.inference.regression`), whose posterior replaces it.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
 from pymc_vcc.inference.pymc.laplace import fit_reference
 from pymc_vcc.inference.pymc.smc import check_kernel, check_max_steps, sample_smc_abc
+from pymc_vcc.inference.regression import regression_abc
 from pymc_vcc.inference.samplers import SAMPLERS, SmcKernel
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.physics.cycles import OUTPUT_IDS
@@ -250,6 +253,7 @@ def smc_sequential_calibration(
     max_steps: int | None = None,
     kernel: SmcKernel = "imh",
     fit_starts: int = 0,
+    refine: int = 0,
 ) -> SequentialResult:
     """Algorithm 1 with tempered SMC: each dataset's posterior, fitted by a Gaussian mixture, is
     the next dataset's prior. SMC-ABC on ``distance`` (default the paper's KS), or with
@@ -257,8 +261,11 @@ def smc_sequential_calibration(
     ``kernel`` (see :func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`), at most ``max_steps``
     steps per stage; with ``fit_starts`` (and ``likelihood``) the tempering starts from the
     Laplace approximations of that many least-squares fits
-    (:func:`~pymc_vcc.inference.pymc.laplace.fit_reference`) instead of the prior. Each tree
-    also gets a ``prior`` group of ``draws`` prior draws."""
+    (:func:`~pymc_vcc.inference.pymc.laplace.fit_reference`) instead of the prior. With
+    ``refine`` > 0, regression-adjusted ABC on that many new simulations around each SMC
+    posterior (:func:`~pymc_vcc.inference.regression.regression_abc`) gives the posterior; the
+    SMC one is kept as group ``smc_posterior`` and the stage's statistics as
+    ``regression_stats``. Each tree also gets a ``prior`` group of ``draws`` prior draws."""
     trees: list[xr.DataTree] = []
     priors: list[Prior] = []
     for k, (observed, stage_seed) in enumerate(
@@ -298,6 +305,24 @@ def smc_sequential_calibration(
         tree["sample_stats"].attrs["n_fit_simulations"] = (
             0 if reference is None else reference.simulations
         )
+        tree["sample_stats"].attrs["n_regression_simulations"] = refine
+        if refine:
+            refined = regression_abc(
+                simulator,
+                prior,
+                tree["posterior"].to_dataset(),
+                observed,
+                n=refine,
+                sensor_noise=sensor_noise,
+                executor=executor,
+                checkpoint=settings.checkpoint_folder(f"estimate_regression_{k}"),
+                seed=stage_seed.spawn(1)[0],
+                time_limit=settings.time_limit,
+                progress=bool(settings.progress),
+            )
+            tree["smc_posterior"] = tree["posterior"]
+            tree["posterior"] = refined["posterior"]
+            tree["regression_stats"] = refined["sample_stats"]
         draws_of_prior = prior.sample(draws, np.random.default_rng(prior_seed))
         tree["prior"] = xr.DataTree(
             xr.Dataset(
@@ -329,6 +354,7 @@ def estimation_study(
     kernel_steps: int | None = None,
     kernel: SmcKernel = "imh",
     fit_starts: int = 0,
+    refine: int = 0,
 ) -> EstimationResult:
     """Sequential calibration of all 26 parameters on two simulated datasets (Figs. 5 to 8).
 
@@ -355,6 +381,8 @@ def estimation_study(
             proposals, PyMC's default) or ``"mh"`` (random-walk steps).
         fit_starts: ``"likelihood"``: temper from the Laplace approximations of least-squares
             fits from this many starts instead of from the prior (0: from the prior).
+        refine: ``"smc"``: after each dataset's SMC-ABC, this many new simulations around its
+            posterior for regression-adjusted ABC, whose posterior replaces it (0: none).
     """
     if method not in SAMPLERS:
         raise ValueError(f"method must be one of {list(SAMPLERS)}, got {method!r}")
@@ -369,6 +397,13 @@ def estimation_study(
         raise ValueError(
             f"fit_starts applies to method='likelihood' only (the fit needs its residuals), "
             f"got method={method!r}"
+        )
+    if isinstance(refine, bool) or int(refine) != refine or refine < 0:
+        raise ValueError(f"refine must be a non-negative integer, got {refine!r}")
+    if refine and method != "smc":
+        raise ValueError(
+            f"refine applies to method='smc' only (it starts from an SMC-ABC posterior), got "
+            f"method={method!r}"
         )
     if likelihood and sensor_noise is None:
         raise ValueError(
@@ -424,6 +459,7 @@ def estimation_study(
                 max_steps=kernel_steps,
                 kernel=kernel,
                 fit_starts=fit_starts,
+                refine=int(refine),
             )
         else:
             calibration = sequential_calibration(
@@ -466,6 +502,7 @@ def estimation_study(
         simulations=[
             int(tree["sample_stats"]["n_simulations"])
             + tree["sample_stats"].attrs.get("n_fit_simulations", 0)
+            + tree["sample_stats"].attrs.get("n_regression_simulations", 0)
             for tree in calibration.trees
         ],
         wall_seconds=time.perf_counter() - started,
