@@ -440,9 +440,9 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=0,
         metavar="SIMULATIONS",
-        help="smc: after each dataset's SMC-ABC, this many new simulations around its posterior "
-        "for regression-adjusted ABC (learnt summaries, local-linear adjustment), whose "
-        "posterior replaces it (default 0: none)",
+        help="smc: after each dataset's SMC-ABC, this many new simulations around its posterior, "
+        "over two rounds, for regression-adjusted ABC (learnt summaries, local-linear "
+        "adjustment), whose posterior replaces it (default 0: none)",
     )
     estimate.set_defaults(handler=_estimate)
 

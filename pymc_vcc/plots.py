@@ -117,6 +117,21 @@ def plot_inputs(inputs: xr.Dataset, *, calibration_end: float | None = None) -> 
     return figure
 
 
+SPIKE_POINTS = 512
+"""Points of a spike where no KDE sets the grid (ArviZ's default length)."""
+
+
+def _spike(value: float, n_points: int) -> xr.DataArray:
+    """A unit-area triangle of half-width 1e-6·|value| (or 1e-9) on ``value``: the density
+    figure of draws that all coincide, where a KDE has no bandwidth."""
+    half_width = 1e-6 * abs(value) or 1e-9
+    x = np.linspace(value - half_width, value + half_width, n_points)
+    y = (1 - np.abs(x - value) / half_width) / half_width
+    return xr.DataArray(
+        np.stack([x, y]), dims=("plot_axis", "kde_dim"), coords={"plot_axis": ["x", "y"]}
+    )
+
+
 def _densities(
     tree: xr.DataTree, names: Sequence[str], uniform: Mapping[str, tuple[float, float]]
 ) -> xr.Dataset:
@@ -128,7 +143,14 @@ def _densities(
     groups = []
     for group in ("prior", "posterior"):
         draws = tree[group].to_dataset()[list(names)]
-        groups.append(kde(draws, dim=[d for d in ("chain", "draw") if d in draws.dims]))
+        spread = [name for name in names if np.ptp(draws[name].values) > 0]
+        found = xr.Dataset()
+        if spread:
+            found = kde(draws[spread], dim=[d for d in ("chain", "draw") if d in draws.dims])
+        for name in (name for name in names if name not in spread):
+            points = found.sizes.get("kde_dim", SPIKE_POINTS)
+            found[name] = _spike(float(draws[name].values.flat[0]), points)
+        groups.append(found)
     density = xr.concat(groups, dim="group", coords="minimal", compat="override")
     density = density.drop_vars([c for c in density.coords if c.startswith("bw_")])
     density = density.assign_coords(group=["prior", "posterior"])

@@ -187,3 +187,15 @@ def test_arviz_labels_and_display_units():
     names = labeller(shown, [load_unit().parameters["M0"]])
     assert names.var_name_to_str("PD") == "Discharge pressure\n(bar)"
     assert names.var_name_to_str("M0") == "Total refrigerant mass\n(kg)"
+
+
+def test_a_posterior_whose_draws_all_coincide_is_drawn_as_a_spike():
+    tree = _tree(np.random.default_rng(4))
+    tree["posterior"] = xr.DataTree(
+        tree["posterior"].to_dataset().assign(M0=(("chain", "draw"), np.full((1, 300), 1.42)))
+    )
+    figure = plot_prior_posterior(tree, ["M0", "cf_lev"])
+    spike = next(line for line in figure.axes[0].lines if line.get_label() == "posterior")
+    x, y = spike.get_xdata(), spike.get_ydata()
+    assert x[np.argmax(y)] == pytest.approx(1.42) and np.ptp(x) < 1e-5
+    assert np.trapezoid(y, x) == pytest.approx(1.0, rel=0.01)

@@ -19,8 +19,10 @@ from pymc_vcc.inference.identifiability import Direction
 from pymc_vcc.inference.likelihood import log_likelihood
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.sequential import SequentialResult
 from pymc_vcc.inference.series import prepare_observed
 from pymc_vcc.studies import StudySettings, estimation_study, leak_study
+from pymc_vcc.studies.common import write_netcdf
 from pymc_vcc.studies.estimate import (
     EstimationResult,
     _collapse_warnings,
@@ -218,6 +220,66 @@ def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stag
         assert draws.mean() == pytest.approx(mean, abs=0.1 * sd)
         assert draws.std() == pytest.approx(sd, rel=0.1)
     assert result.trees[1]["prior"]["M0"].size == 600
+
+
+def test_sequential_smc_with_refine_gives_each_stage_the_exact_posterior(quiet_pymc, tmp_path):
+    """SMC-ABC on the KS distance only locates each posterior; the regression stage on fresh
+    draws around it gives the exact one, and dataset 2 (from dataset 1's GMM) is tighter."""
+    problem = SensorProblem()
+    noise = SensorNoise.typical()
+    rng = np.random.default_rng(7)
+    observed = [noise.measure(problem.dataset(1.3), rng) for _ in range(2)]
+    with make_executor("serial") as executor:
+        result = smc_sequential_calibration(
+            problem,
+            UniformPrior(problem.bounds),
+            observed,
+            draws=200,
+            epsilon=0.05,
+            executor=executor,
+            settings=StudySettings(executor="serial"),
+            seed=np.random.SeedSequence(1),
+            sensor_noise=noise,
+            refine=6000,
+        )
+    grid = np.linspace(1.1, 1.5, 8001)  # the exact posteriors, on a grid of the flat prior
+    log_p = np.zeros_like(grid)
+    spreads = []
+    for tree, data in zip(result.trees, observed, strict=True):
+        prepared = prepare_observed(data, None, problem.output_names)
+        resolved = noise.resolve(prepared)
+        log_p += [log_likelihood(prepared.values, problem.outputs(m), resolved) for m in grid]
+        weights = np.exp(log_p - log_p.max())
+        mean = np.average(grid, weights=weights)
+        sd = np.sqrt(np.average((grid - mean) ** 2, weights=weights))
+        draws = tree["posterior"]["M0"].values.ravel()
+        assert draws.mean() == pytest.approx(mean, abs=0.25 * sd)
+        assert draws.std() == pytest.approx(sd, rel=0.15)
+        assert "smc_posterior" in tree and int(tree["regression_stats"]["n_simulations"]) == 6000
+        assert tree["sample_stats"].attrs["n_regression_simulations"] == 6000
+        spreads.append(draws.std())
+    assert spreads[1] < spreads[0]
+    write_netcdf(result.to_datatree(), tmp_path / "calibration.nc")
+    for tree in SequentialResult.from_netcdf(tmp_path / "calibration.nc").trees:
+        assert {"smc_posterior", "regression_stats"} <= set(tree.children)
+
+
+def test_estimate_refines_smc_only(tmp_path, capsys):
+    with pytest.raises(ValueError, match="refine applies to method='smc' only"):
+        estimation_study(StudySettings(budget="smoke", out=tmp_path / "e"), refine=100)
+    with pytest.raises(ValueError, match="refine must be a non-negative integer, got -1"):
+        estimation_study(StudySettings(budget="smoke", out=tmp_path / "e"), method="smc", refine=-1)
+    with pytest.raises(
+        ValueError, match=r"keeps 30; the adjustment of 35 parameters .* 1440 draws"
+    ):
+        estimation_study(
+            StudySettings(budget="smoke", out=tmp_path / "e"), method="smc", refine=600
+        )
+    assert not (tmp_path / "e" / "checkpoints").exists()
+    assert (
+        main(["estimate", "--budget", "smoke", "--out", str(tmp_path / "e"), "--refine", "10"]) == 2
+    )
+    assert "refine applies to method='smc' only" in capsys.readouterr().err
 
 
 def test_estimate_refuses_an_unknown_distance_before_any_work(tmp_path):

@@ -7,20 +7,28 @@ the posterior's place and spends its simulations on fresh, independent draws the
 
 1. **Box**: each parameter's range over the posterior draws, widened by ``widen`` of that range
    on each side and clipped to the prior's bounds.
-2. **Draws**: ``n`` draws of the prior restricted to the box (the restriction drops only prior
-   mass the posterior does not reach, so the posterior is unchanged).
+2. **Draws**: ``n`` draws uniform in the box, each weighted by its prior density (importance
+   sampling; equal weights under a uniform prior). The box drops only prior mass the posterior
+   does not reach, so the posterior is unchanged.
 3. **Simulations**: noise-free and checkpointed (:func:`~pymc_vcc.inference.reference_table.
    simulate_draws`), then each draw's output noise: the paper's ν or learnable sensor scales
    σ among the draw's parameters, or known sensor noise.
 4. **Summaries** (semi-automatic ABC): each output's 10 s means over its observed spread; a
-   partial-least-squares regression of the parameters on them, fitted on half the draws with
-   its number of components chosen by k-fold cross-validation, predicts every parameter. The
-   parameters are regressed as ``logit`` of their place between the prior's bounds.
+   ridge regression of each parameter on them (standardized), fitted on half the draws with
+   its penalty chosen by leave-one-out error, predicts every parameter. The parameters are
+   regressed as ``logit`` of their place between the prior's bounds. (Ridge explains more than
+   partial least squares with up to 30 components: held-out R² of M0 0.92 against 0.87 on
+   dataset 1's noise-free draws.)
 5. **Rejection**: the ``accept`` fraction of draws whose summaries lie nearest the observed
-   ones (Euclidean, each summary over its parameter's spread), Epanechnikov weights.
+   ones (Euclidean, each summary over its parameter's spread), Epanechnikov weights times the
+   prior weights.
 6. **Adjustment**: weighted least squares of the parameters on the summaries' offsets from the
    observed ones; each accepted draw is moved by −B·(s − s_obs), back through the logistic
    (inside the bounds).
+7. **Rounds**: the next round draws in the box of this round's posterior. Summaries fitted
+   over a box much wider than the posterior are linear where the outputs are not, and the
+   first round's posterior can be wide and off (3 sd on the one-parameter sensor problem from
+   a KS-SMC posterior); the second round's summaries are fitted where the posterior is.
 
 A parameter the outputs do not inform has no predictive summary and no slope: it keeps the
 spread of the box draws, the prior's. The result is weighted; it is resampled (systematic) to
@@ -29,6 +37,7 @@ as many equally weighted draws as were accepted.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -36,10 +45,11 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
-from sklearn.cross_decomposition import PLSRegression
-from sklearn.model_selection import KFold
+from sklearn.linear_model import RidgeCV
+from sklearn.pipeline import Pipeline, make_pipeline
+from sklearn.preprocessing import StandardScaler
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind
+from pymc_vcc.execution.executors import Executor, ExecutorKind, executor_scope
 from pymc_vcc.execution.outcomes import OK
 from pymc_vcc.inference.distances import output_scales, window_means
 from pymc_vcc.inference.noise import (
@@ -51,20 +61,24 @@ from pymc_vcc.inference.noise import (
 )
 from pymc_vcc.inference.priors import Prior
 from pymc_vcc.inference.reference_table import simulate_draws
-from pymc_vcc.inference.series import OutputData, prepare_observed
+from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
 from pymc_vcc.inference.simulator import Simulator
 
 SUMMARY_WINDOW = 10
 """Samples averaged into one summary feature (10 s on the 1 s grid)."""
 
-MAX_COMPONENTS = 30
-"""Most partial-least-squares components tried."""
+RIDGE_PENALTIES = np.logspace(-4, 4, 17)
+"""Ridge penalties tried for each parameter's summary (on standardized features)."""
 
-CV_FOLDS = 5
-"""Folds of the cross-validation choosing the number of components."""
+ACCEPT = 0.1
+"""Default fraction of a round's draws kept, nearest in summaries to the data."""
 
-MAX_BOX_TRIES = 2000
-"""Prior draws tried per wanted draw inside the box before giving up."""
+ACCEPTED_PER_COEFFICIENT = 4
+"""Accepted draws needed per coefficient of the adjustment (with barely more draws than
+coefficients the fit passes through them and every adjusted draw lands on one point)."""
+
+ROUNDS = 2
+"""Default rounds, each around the posterior of the one before (module docstring, step 7)."""
 
 
 def _check_fraction(name: str, value: float, low: float, high: float) -> float:
@@ -93,25 +107,26 @@ def posterior_box(
 
 
 def draw_in_box(
-    prior: Prior, box: Mapping[str, tuple[float, float]], n: int, rng: np.random.Generator
+    names: tuple[str, ...], box: Mapping[str, tuple[float, float]], n: int, rng: np.random.Generator
 ) -> np.ndarray:
-    """``n`` draws (n, d) of ``prior`` restricted to ``box`` (name -> (low, high)), by rejection."""
-    low = np.array([box[name][0] for name in prior.names])
-    high = np.array([box[name][1] for name in prior.names])
-    kept: list[np.ndarray] = []
-    found, tried, batch = 0, 0, max(int(n), 64)
-    while found < n:
-        if tried > MAX_BOX_TRIES * n:
-            raise RuntimeError(
-                f"only {found} of {tried} prior draws fell inside the box; the prior puts too "
-                "little mass there (is the posterior from another prior?)"
-            )
-        draws = prior.sample(batch, rng)
-        inside = draws[((draws >= low) & (draws <= high)).all(axis=1)]
-        kept.append(inside)
-        found += len(inside)
-        tried += batch
-    return np.concatenate(kept)[:n]
+    """``n`` draws (n, d) uniform in ``box`` (name -> (low, high)), columns in ``names`` order."""
+    low = np.array([box[name][0] for name in names])
+    high = np.array([box[name][1] for name in names])
+    return rng.uniform(low, high, size=(int(n), len(names)))
+
+
+def check_draws(n: int, dimensions: int, accept: float) -> int:
+    """The draws the ``accept`` fraction of ``n`` keeps, refused if fewer than
+    :data:`ACCEPTED_PER_COEFFICIENT` per coefficient of the adjustment (``dimensions`` + 1)."""
+    kept = round(accept * n)
+    needed = ACCEPTED_PER_COEFFICIENT * (dimensions + 1)
+    if kept < needed:
+        raise ValueError(
+            f"accept={accept} of {n} draws keeps {kept}; the adjustment of {dimensions} "
+            f"parameters needs at least {needed}: give at least "
+            f"{math.ceil(needed / accept)} draws a round or a larger accept"
+        )
+    return kept
 
 
 def summary_features(
@@ -133,46 +148,12 @@ def _from_logit(z: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarr
     return lower + (upper - lower) / (1 + np.exp(-z))
 
 
-@dataclass(frozen=True)
-class _Pls:
-    """A partial-least-squares regression of standardized parameters on standardized
-    features; its first ``c`` components predict as a fit with ``c`` components would (NIPALS
-    finds them one after another)."""
-
-    model: PLSRegression
-    x_mean: np.ndarray
-    x_scale: np.ndarray
-    z_mean: np.ndarray
-    z_scale: np.ndarray
-
-    @classmethod
-    def fit(cls, x: np.ndarray, z: np.ndarray, components: int) -> _Pls:
-        x_mean, x_scale = x.mean(axis=0), x.std(axis=0)
-        z_mean, z_scale = z.mean(axis=0), z.std(axis=0)
-        x_scale[x_scale == 0] = 1.0  # a feature or parameter that never varies
-        z_scale[z_scale == 0] = 1.0
-        model = PLSRegression(components, scale=False).fit(
-            (x - x_mean) / x_scale, (z - z_mean) / z_scale
-        )
-        return cls(model, x_mean, x_scale, z_mean, z_scale)
-
-    def predict(self, x: np.ndarray, components: int | None = None) -> np.ndarray:
-        used = components or self.model.n_components
-        scores = ((x - self.x_mean) / self.x_scale) @ self.model.x_rotations_[:, :used]
-        return scores @ self.model.y_loadings_[:, :used].T * self.z_scale + self.z_mean
-
-
-def _choose_components(x: np.ndarray, z: np.ndarray, most: int, seed: int) -> int:
-    """The number of PLS components with the least cross-validated squared error, each
-    parameter over its variance."""
-    errors = np.zeros(most)
-    spread = z.var(axis=0) + 1e-300
-    for train, test in KFold(CV_FOLDS, shuffle=True, random_state=seed).split(x):
-        fitted = _Pls.fit(x[train], z[train], most)
-        for c in range(1, most + 1):
-            gap = fitted.predict(x[test], c) - z[test]
-            errors[c - 1] += ((gap**2) / spread).sum()
-    return int(np.argmin(errors)) + 1
+def _fit_summaries(x: np.ndarray, z: np.ndarray) -> Pipeline:
+    """Ridge regressions of each parameter on the standardized features, each with the penalty
+    its leave-one-out error prefers among :data:`RIDGE_PENALTIES`."""
+    return make_pipeline(
+        StandardScaler(), RidgeCV(alphas=RIDGE_PENALTIES, alpha_per_target=True)
+    ).fit(x, z)
 
 
 @dataclass(frozen=True)
@@ -183,7 +164,7 @@ class Adjustment:
         thetas: accepted draws before adjustment (n_accepted, d), physical units.
         adjusted: the same draws after the local-linear adjustment (n_accepted, d).
         weights: Epanechnikov weights of the accepted draws (n_accepted,), summing to 1.
-        components: PLS components of the summaries.
+        penalties: per parameter, the ridge penalty of its summary.
         held_out_r2: per parameter, R² of its summary on the draws the fit did not see.
         bandwidth: largest accepted distance between summaries.
     """
@@ -191,7 +172,7 @@ class Adjustment:
     thetas: np.ndarray
     adjusted: np.ndarray
     weights: np.ndarray
-    components: int
+    penalties: np.ndarray
     held_out_r2: np.ndarray
     bandwidth: float
 
@@ -208,12 +189,13 @@ def regression_adjustment(
     lower: np.ndarray,
     upper: np.ndarray,
     *,
-    accept: float = 0.1,
-    seed: int = 0,
+    accept: float = ACCEPT,
+    log_prior: np.ndarray | None = None,
 ) -> Adjustment:
     """Semi-automatic summaries, rejection and local-linear adjustment (module docstring, steps
     4–6) of draws ``thetas`` (N, d) inside ``lower``/``upper`` with ``features`` (N, F) of their
-    simulations and ``observed_features`` (F,) of the data."""
+    simulations and ``observed_features`` (F,) of the data; ``log_prior`` (N,) is each draw's
+    log prior density over its proposal's (None: all equal)."""
     thetas = np.asarray(thetas, dtype=float)
     features = np.asarray(features, dtype=float)
     n, d = thetas.shape
@@ -223,19 +205,12 @@ def regression_adjustment(
             f"features {features.shape} and observed features {observed_features.shape} do not "
             f"match {n} draws"
         )
-    n_accept = round(accept * n)
-    if n_accept < d + 2:
-        raise ValueError(
-            f"accept={accept} of {n} draws keeps {n_accept}; the adjustment of {d} parameters "
-            f"needs at least {d + 2}: give more draws or a larger accept"
-        )
+    n_accept = check_draws(n, d, accept)
     z = _to_logit(thetas, lower, upper)
     fit = np.arange(n) < n // 2
-    most = max(1, min(MAX_COMPONENTS, features.shape[1], int(fit.sum()) // 2 - 1))
-    components = _choose_components(features[fit], z[fit], most, seed)
-    model = _Pls.fit(features[fit], z[fit], components)
-    summaries = model.predict(features)
-    observed_summary = model.predict(observed_features[np.newaxis])[0]
+    model = _fit_summaries(features[fit], z[fit])
+    summaries = model.predict(features).reshape(n, d)
+    observed_summary = model.predict(observed_features[np.newaxis]).reshape(d)
     held_out = z[~fit]
     held_out_r2 = 1 - ((summaries[~fit] - held_out) ** 2).mean(axis=0) / (
         held_out.var(axis=0) + 1e-300
@@ -245,6 +220,11 @@ def regression_adjustment(
     nearest = np.argsort(distance, kind="stable")[:n_accept]
     bandwidth = float(distance[nearest[-1]]) * (1 + 1e-9) + 1e-300
     weights = 1 - (distance[nearest] / bandwidth) ** 2
+    if log_prior is not None:
+        accepted_log_prior = np.asarray(log_prior, dtype=float)[nearest]
+        if not np.isfinite(accepted_log_prior).any():
+            raise ValueError("the prior has no mass at any accepted draw (a box outside it?)")
+        weights = weights * np.exp(accepted_log_prior - accepted_log_prior.max())
     weights /= weights.sum()
     design = np.column_stack([np.ones(n_accept), offsets[nearest]])
     root = np.sqrt(weights)[:, np.newaxis]
@@ -254,7 +234,7 @@ def regression_adjustment(
         thetas=thetas[nearest],
         adjusted=_from_logit(adjusted, lower, upper),
         weights=weights,
-        components=components,
+        penalties=np.broadcast_to(model[-1].alpha_, d).copy(),
         held_out_r2=held_out_r2,
         bandwidth=bandwidth,
     )
@@ -296,52 +276,37 @@ def _add_noise(
     return values
 
 
-def regression_abc(
+@dataclass(frozen=True)
+class _Round:
+    """One round's posterior draws (n_accepted, d) resampled by weight, its adjustment and box,
+    its failed simulations and the data as the simulations' outputs."""
+
+    draws: np.ndarray
+    adjustment: Adjustment
+    box: dict[str, tuple[float, float]]
+    failed: int
+    data: ObservedData
+
+
+def _regression_round(
     simulator: Simulator,
     prior: Prior,
     posterior: xr.Dataset,
     observed: OutputData,
-    *,
     n: int,
-    widen: float = 0.5,
-    accept: float = 0.1,
-    sensor_noise: SensorNoise | None = None,
-    executor: Executor | ExecutorKind = "processes",
-    n_workers: int | None = None,
-    checkpoint: str | Path | None = None,
-    seed: int | np.random.SeedSequence | None = None,
-    time_limit: float | None = None,
-    progress: bool | None = None,
-) -> xr.DataTree:
-    """The regression-adjusted posterior of ``observed`` around ``posterior`` (module docstring).
-
-    Args:
-        simulator: the model, ``simulator(theta, rng)`` on the observed grid, deterministic.
-        prior: the prior of the calibration (model parameters and any noise scales).
-        posterior: a posterior group holding every prior parameter (e.g. SMC-ABC's).
-        observed: the data, a Dataset of outputs or an array (outputs, time).
-        n: new simulations, drawn from the prior inside the posterior's box.
-        widen: the box's margin on each side, in ranges of the posterior draws.
-        accept: fraction of the draws kept, nearest in summaries to the data.
-        sensor_noise: sensor noise of the data (learnable scales ``sigma_<output>`` in the
-            prior replace its fixed ones); None: only the prior's ν, if any.
-        executor, n_workers, time_limit, progress: where and how the simulations run.
-        checkpoint: folder persisting each finished chunk of simulations.
-        seed: integer or SeedSequence of the draws, the noise and the cross-validation.
-
-    Returns:
-        A DataTree: ``posterior`` (1 chain, the accepted draws adjusted and resampled by weight),
-        ``sample_stats`` (``n_simulations``, ``n_failed``, ``n_accepted``, ``effective_size``,
-        ``components``, ``bandwidth``, ``held_out_r2`` per parameter) and ``observed_data``.
-    """
-    started = time.perf_counter()
-    if isinstance(n, bool) or int(n) != n or n < 1:
-        raise ValueError(f"n must be a positive integer, got {n!r}")
-    _check_fraction("accept", accept, 0.0, 1.0)
-    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    box_seed, noise_seed, simulation_seed, cv_seed, resample_seed = root.spawn(5)
+    widen: float,
+    accept: float,
+    sensor_noise: SensorNoise | None,
+    executor: Executor,
+    checkpoint: Path | None,
+    seed: np.random.SeedSequence,
+    time_limit: float | None,
+    progress: bool | None,
+) -> _Round:
+    """One round (module docstring, steps 1–6)."""
+    box_seed, noise_seed, simulation_seed, resample_seed = seed.spawn(4)
     box = posterior_box(posterior, prior, widen)
-    draws = draw_in_box(prior, box, int(n), np.random.default_rng(box_seed))
+    draws = draw_in_box(prior.names, box, n, np.random.default_rng(box_seed))
     model = tuple(name for name in prior.names if not is_noise_parameter(name))
     columns = [prior.names.index(name) for name in model]
     table = simulate_draws(
@@ -350,7 +315,6 @@ def regression_abc(
         draws[:, columns],
         observed,
         executor=executor,
-        n_workers=n_workers,
         checkpoint=checkpoint,
         seed=simulation_seed,
         time_limit=time_limit,
@@ -366,51 +330,128 @@ def regression_abc(
         table.outputs,
         sensor_noise,
         observed,
-        noise_seed.spawn(int(n)),
+        noise_seed.spawn(n),
     )
-    features = summary_features(values[finished], data.values)
     adjustment = regression_adjustment(
         draws[finished],
-        features,
+        summary_features(values[finished], data.values),
         summary_features(data.values[np.newaxis], data.values)[0],
         prior.lower,
         prior.upper,
         accept=accept,
-        seed=int(cv_seed.generate_state(1)[0]),
+        log_prior=prior.logpdf(draws[finished]),
     )
     rng = np.random.default_rng(resample_seed)
     size = len(adjustment.weights)
     positions = (rng.uniform() + np.arange(size)) / size
     picked = np.minimum(np.searchsorted(np.cumsum(adjustment.weights), positions), size - 1)
-    posterior_draws = adjustment.adjusted[picked]
-    tree = xr.DataTree.from_dict(
-        {
-            "posterior": xr.Dataset(
+    return _Round(adjustment.adjusted[picked], adjustment, box, int((~finished).sum()), data)
+
+
+def regression_abc(
+    simulator: Simulator,
+    prior: Prior,
+    posterior: xr.Dataset,
+    observed: OutputData,
+    *,
+    n: int,
+    rounds: int = ROUNDS,
+    widen: float = 0.5,
+    accept: float = ACCEPT,
+    sensor_noise: SensorNoise | None = None,
+    executor: Executor | ExecutorKind = "processes",
+    n_workers: int | None = None,
+    checkpoint: str | Path | None = None,
+    seed: int | np.random.SeedSequence | None = None,
+    time_limit: float | None = None,
+    progress: bool | None = None,
+) -> xr.DataTree:
+    """The regression-adjusted posterior of ``observed`` around ``posterior`` (module docstring).
+
+    Args:
+        simulator: the model, ``simulator(theta, rng)`` on the observed grid, deterministic.
+        prior: the prior of the calibration (model parameters and any noise scales).
+        posterior: a posterior group holding every prior parameter (e.g. SMC-ABC's).
+        observed: the data, a Dataset of outputs or an array (outputs, time).
+        n: new simulations per round, drawn from the prior inside the posterior's box.
+        rounds: rounds, each around the posterior of the one before.
+        widen: the box's margin on each side, in ranges of the posterior draws.
+        accept: fraction of the draws kept, nearest in summaries to the data.
+        sensor_noise: sensor noise of the data (learnable scales ``sigma_<output>`` in the
+            prior replace its fixed ones); None: only the prior's ν, if any.
+        executor, n_workers, time_limit, progress: where and how the simulations run.
+        checkpoint: folder persisting each finished chunk of simulations (a subfolder a round).
+        seed: integer or SeedSequence of the draws, the noise and the resampling.
+
+    Returns:
+        A DataTree: ``posterior`` (1 chain, the last round's accepted draws adjusted and
+        resampled by weight), ``sample_stats`` (``n_simulations`` and ``n_failed`` of all
+        rounds; the last round's ``n_accepted``, ``effective_size``, ``bandwidth``, and
+        ``held_out_r2`` and ``penalty`` per parameter; ``box_low`` and ``box_high`` per round and
+        parameter) and ``observed_data``.
+    """
+    started = time.perf_counter()
+    for name, value in (("n", n), ("rounds", rounds)):
+        if isinstance(value, bool) or int(value) != value or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    _check_fraction("accept", accept, 0.0, 1.0)
+    check_draws(int(n), len(prior.names), accept)
+    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    boxes, failed = [], 0
+    with executor_scope(executor, n_workers) as running:
+        for index, round_seed in enumerate(root.spawn(int(rounds))):
+            last = _regression_round(
+                simulator,
+                prior,
+                posterior,
+                observed,
+                int(n),
+                widen,
+                accept,
+                sensor_noise,
+                running,
+                None if checkpoint is None else Path(checkpoint) / f"round_{index}",
+                round_seed,
+                time_limit,
+                progress,
+            )
+            posterior = xr.Dataset(
                 {
-                    name: (("chain", "draw"), posterior_draws[np.newaxis, :, j])
+                    name: (("chain", "draw"), last.draws[np.newaxis, :, j])
                     for j, name in enumerate(prior.names)
                 }
-            ),
+            )
+            boxes.append(last.box)
+            failed += last.failed
+    return xr.DataTree.from_dict(
+        {
+            "posterior": posterior,
             "sample_stats": xr.Dataset(
                 {
-                    "n_simulations": ((), int(n)),
-                    "n_failed": ((), int((~finished).sum())),
-                    "n_accepted": ((), size),
-                    "effective_size": ((), adjustment.effective_size),
-                    "components": ((), adjustment.components),
-                    "bandwidth": ((), adjustment.bandwidth),
-                    "held_out_r2": (("parameter",), adjustment.held_out_r2),
+                    "n_simulations": ((), int(n) * int(rounds)),
+                    "n_failed": ((), failed),
+                    "n_accepted": ((), len(last.draws)),
+                    "effective_size": ((), last.adjustment.effective_size),
+                    "bandwidth": ((), last.adjustment.bandwidth),
+                    "held_out_r2": (("parameter",), last.adjustment.held_out_r2),
+                    "penalty": (("parameter",), last.adjustment.penalties),
+                    "box_low": (
+                        ("round", "parameter"),
+                        [[b[0] for b in box.values()] for box in boxes],
+                    ),
+                    "box_high": (
+                        ("round", "parameter"),
+                        [[b[1] for b in box.values()] for box in boxes],
+                    ),
                 },
-                coords={"parameter": list(prior.names)},
+                coords={"parameter": list(prior.names), "round": np.arange(int(rounds))},
                 attrs={
                     "sampler": "regression_abc",
                     "widen": float(widen),
                     "accept": float(accept),
-                    "box": str(box),
                     "wall_seconds": time.perf_counter() - started,
                 },
             ),
-            "observed_data": data.dataset,
+            "observed_data": last.data.dataset,
         }
     )
-    return tree

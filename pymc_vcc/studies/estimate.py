@@ -17,7 +17,7 @@ towards the posterior instead of discarding 95 % of its simulations, or the same
 on the exact likelihood of noisy data under known sensor noise (``"likelihood"``). Both ABC
 samplers use the paper's KS distance unless ``distance`` names another (Wasserstein-1, or the
 time-aligned windowed distance). With ``refine``, each SMC-ABC posterior is followed by
-regression-adjusted ABC on that many new simulations around it
+regression-adjusted ABC on that many new simulations around it, over two rounds
 (:mod:`~pymc_vcc.inference.regression`), whose posterior replaces it.
 """
 
@@ -39,7 +39,7 @@ from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
 from pymc_vcc.inference.pymc.laplace import fit_reference
 from pymc_vcc.inference.pymc.smc import check_kernel, check_max_steps, sample_smc_abc
-from pymc_vcc.inference.regression import regression_abc
+from pymc_vcc.inference.regression import ACCEPT, ROUNDS, check_draws, regression_abc
 from pymc_vcc.inference.samplers import SAMPLERS, SmcKernel
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.physics.cycles import OUTPUT_IDS
@@ -262,8 +262,9 @@ def smc_sequential_calibration(
     steps per stage; with ``fit_starts`` (and ``likelihood``) the tempering starts from the
     Laplace approximations of that many least-squares fits
     (:func:`~pymc_vcc.inference.pymc.laplace.fit_reference`) instead of the prior. With
-    ``refine`` > 0, regression-adjusted ABC on that many new simulations around each SMC
-    posterior (:func:`~pymc_vcc.inference.regression.regression_abc`) gives the posterior; the
+    ``refine`` > 0, regression-adjusted ABC on that many new simulations (over
+    :data:`~pymc_vcc.inference.regression.ROUNDS` rounds) around each SMC posterior
+    (:func:`~pymc_vcc.inference.regression.regression_abc`) gives the posterior; the
     SMC one is kept as group ``smc_posterior`` and the stage's statistics as
     ``regression_stats``. Each tree also gets a ``prior`` group of ``draws`` prior draws."""
     trees: list[xr.DataTree] = []
@@ -305,14 +306,15 @@ def smc_sequential_calibration(
         tree["sample_stats"].attrs["n_fit_simulations"] = (
             0 if reference is None else reference.simulations
         )
-        tree["sample_stats"].attrs["n_regression_simulations"] = refine
+        tree["sample_stats"].attrs["n_regression_simulations"] = 0
         if refine:
             refined = regression_abc(
                 simulator,
                 prior,
                 tree["posterior"].to_dataset(),
                 observed,
-                n=refine,
+                n=refine // ROUNDS,
+                rounds=ROUNDS,
                 sensor_noise=sensor_noise,
                 executor=executor,
                 checkpoint=settings.checkpoint_folder(f"estimate_regression_{k}"),
@@ -323,6 +325,9 @@ def smc_sequential_calibration(
             tree["smc_posterior"] = tree["posterior"]
             tree["posterior"] = refined["posterior"]
             tree["regression_stats"] = refined["sample_stats"]
+            tree["sample_stats"].attrs["n_regression_simulations"] = int(
+                refined["sample_stats"]["n_simulations"]
+            )
         draws_of_prior = prior.sample(draws, np.random.default_rng(prior_seed))
         tree["prior"] = xr.DataTree(
             xr.Dataset(
@@ -382,7 +387,8 @@ def estimation_study(
         fit_starts: ``"likelihood"``: temper from the Laplace approximations of least-squares
             fits from this many starts instead of from the prior (0: from the prior).
         refine: ``"smc"``: after each dataset's SMC-ABC, this many new simulations around its
-            posterior for regression-adjusted ABC, whose posterior replaces it (0: none).
+            posterior (over two rounds) for regression-adjusted ABC, whose posterior replaces
+            it (0: none).
     """
     if method not in SAMPLERS:
         raise ValueError(f"method must be one of {list(SAMPLERS)}, got {method!r}")
@@ -412,6 +418,8 @@ def estimation_study(
         )
     started = time.perf_counter()
     unit = settings.unit(unit)
+    if refine:  # each round must keep enough draws to adjust every parameter and noise scale
+        check_draws(refine // ROUNDS, len(unit.parameters) + len(OUTPUT_IDS), ACCEPT)
     full = VCCSimulator(unit, inputs)
     draw_seed, sampler_seed, predictive_seed = settings.seeds(3)
     rng = np.random.default_rng(draw_seed)
