@@ -58,6 +58,23 @@ def test_the_adjustment_gives_the_exact_posterior_of_a_linear_gaussian_model():
     assert 0.5 * len(found.weights) < found.effective_size < len(found.weights)
 
 
+def test_few_accepted_draws_a_coefficient_keep_the_exact_spread():
+    """60 accepted draws for 13 coefficients: raw residuals would be ~17 % too narrow (the fit
+    bends towards its points); over sqrt(1 - leverage) they have the exact posterior's sd."""
+    rng = np.random.default_rng(3)
+    d, noise = 12, 0.02
+    loadings = rng.normal(size=(d, 20))
+    thetas = rng.uniform(0.3, 0.7, size=(20_000, d))
+    features = thetas @ loadings + noise * rng.standard_normal((20_000, 20))
+    observed = np.full(d, 0.5) @ loadings + noise * rng.standard_normal(20)
+    exact_sd = noise * np.sqrt(np.diag(np.linalg.inv(loadings @ loadings.T)))
+    found = regression_adjustment(thetas, features, observed, 0.0, 1.0, accept=0.003)
+    mean = found.weights @ found.adjusted
+    sd = np.sqrt(found.weights @ (found.adjusted - mean) ** 2)
+    assert len(found.weights) == 60
+    assert np.median(sd / exact_sd) == pytest.approx(1.0, abs=0.08)
+
+
 def test_prior_weights_give_the_exact_posterior_under_a_gaussian_prior():
     """Draws uniform over a box, weighted by a N(0.52, 0.01) prior density: the adjusted draws
     have the conjugate posterior, between the prior and the likelihood."""
@@ -178,8 +195,9 @@ def test_bad_settings_are_refused_before_any_simulation():
         regression_adjustment(np.ones((20, 1)), np.ones((20, 3)), np.ones(3), 0.0, 2.0, accept=0.1)
 
 
-def test_summary_features_are_window_means_over_the_observed_spread():
+def test_summary_features_are_window_means_over_the_observed_spread_and_roughness():
     observed = np.array([[0.0, 2.0, 0.0, 2.0], [5.0, 5.0, 7.0, 7.0]])
     features = summary_features(observed[np.newaxis], observed, window=2)
-    assert features.shape == (1, 4)
-    np.testing.assert_allclose(features[0], [1.0, 1.0, 5.0, 7.0])
+    assert features.shape == (1, 6)
+    # means over the spread (1 for both); rms deviation within windows over the rms value
+    np.testing.assert_allclose(features[0], [1.0, 1.0, 5.0, 7.0, 1.0 / np.sqrt(2.0), 0.0])

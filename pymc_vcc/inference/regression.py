@@ -13,7 +13,9 @@ the posterior's place and spends its simulations on fresh, independent draws the
 3. **Simulations**: noise-free and checkpointed (:func:`~pymc_vcc.inference.reference_table.
    simulate_draws`), then each draw's output noise: the paper's ν or learnable sensor scales
    σ among the draw's parameters, or known sensor noise.
-4. **Summaries** (semi-automatic ABC): each output's 10 s means over its observed spread; a
+4. **Summaries** (semi-automatic ABC): each output's 10 s means over its observed spread and
+   its roughness within them (which tells the output noise's scale, so that a second round
+   draws it where the data put it, and its simulations are no noisier than the data); a
    ridge regression of each parameter on them (standardized), fitted on half the draws with
    its penalty chosen by leave-one-out error, predicts every parameter. The parameters are
    regressed as ``logit`` of their place between the prior's bounds. (Ridge explains more than
@@ -23,8 +25,9 @@ the posterior's place and spends its simulations on fresh, independent draws the
    ones (Euclidean, each summary over its parameter's spread), Epanechnikov weights times the
    prior weights.
 6. **Adjustment**: weighted least squares of the parameters on the summaries' offsets from the
-   observed ones; each accepted draw is moved by −B·(s − s_obs), back through the logistic
-   (inside the bounds).
+   observed ones; each accepted draw becomes the fit at the data plus its residual over
+   sqrt(1 − leverage) (the raw residuals of d + 1 coefficients fitted to a few hundred draws
+   are too small by that factor), back through the logistic (inside the bounds).
 7. **Rounds**: the next round draws in the box of this round's posterior. Summaries fitted
    over a box much wider than the posterior are linear where the outputs are not, and the
    first round's posterior can be wide and off (3 sd on the one-parameter sensor problem from
@@ -76,6 +79,9 @@ ACCEPT = 0.1
 ACCEPTED_PER_COEFFICIENT = 4
 """Accepted draws needed per coefficient of the adjustment (with barely more draws than
 coefficients the fit passes through them and every adjusted draw lands on one point)."""
+
+MAX_LEVERAGE = 0.9
+"""Largest leverage a residual is corrected for (its inflation at most 1/sqrt(0.1) ≈ 3.2)."""
 
 ROUNDS = 2
 """Default rounds, each around the posterior of the one before (module docstring, step 7)."""
@@ -132,11 +138,16 @@ def check_draws(n: int, dimensions: int, accept: float) -> int:
 def summary_features(
     values: np.ndarray, observed: np.ndarray, window: int = SUMMARY_WINDOW
 ) -> np.ndarray:
-    """Each output's ``window``-sample means over its observed spread, flattened.
+    """Each output's ``window``-sample means over its observed spread, then each output's
+    roughness: its rms deviation from those means over its rms value (where output noise shows).
 
     ``values`` (N, n_outputs, n) on the observed grid, ``observed`` (n_outputs, n) → (N, F)."""
-    scaled = window_means(np.asarray(values, dtype=float), window) / output_scales(observed)
-    return scaled.reshape(scaled.shape[0], -1)
+    values = np.asarray(values, dtype=float)
+    means = window_means(values, window)
+    within = values[..., : means.shape[-1] * window] - np.repeat(means, window, axis=-1)
+    roughness = np.sqrt((within**2).mean(axis=-1) / (values**2).mean(axis=-1))
+    scaled = means / output_scales(observed)
+    return np.concatenate([scaled.reshape(scaled.shape[0], -1), roughness], axis=1)
 
 
 def _to_logit(thetas: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -180,6 +191,15 @@ class Adjustment:
     def effective_size(self) -> float:
         """Kish's effective sample size of the weights."""
         return float(1.0 / (self.weights**2).sum())
+
+
+def _leverages(design: np.ndarray) -> np.ndarray:
+    """The hat matrix's diagonal of a least-squares ``design`` (n, p), at most
+    :data:`MAX_LEVERAGE`: a residual over sqrt(1 − h) has the noise's variance, where the raw
+    residual's is (1 − h) of it (the fit bends towards each of its points)."""
+    left, singular, _ = np.linalg.svd(design, full_matrices=False)
+    rank = int((singular > singular[0] * 1e-10).sum()) if singular.size else 0
+    return np.minimum((left[:, :rank] ** 2).sum(axis=1), MAX_LEVERAGE)
 
 
 def regression_adjustment(
@@ -229,7 +249,8 @@ def regression_adjustment(
     design = np.column_stack([np.ones(n_accept), offsets[nearest]])
     root = np.sqrt(weights)[:, np.newaxis]
     coefficients, *_ = np.linalg.lstsq(design * root, z[nearest] * root, rcond=None)
-    adjusted = z[nearest] - offsets[nearest] @ coefficients[1:]
+    residuals = z[nearest] - design @ coefficients
+    adjusted = coefficients[0] + residuals / np.sqrt(1 - _leverages(design * root))[:, np.newaxis]
     return Adjustment(
         thetas=thetas[nearest],
         adjusted=_from_logit(adjusted, lower, upper),
