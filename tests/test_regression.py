@@ -127,7 +127,7 @@ def test_regression_abc_gives_the_exact_posterior_of_noisy_sensor_data():
     stats = tree["sample_stats"]
     assert int(stats["n_simulations"]) == 6000 and int(stats["n_accepted"]) == 300
     assert int(stats["n_failed"]) == 0
-    assert float(stats["held_out_r2"].sel(parameter="M0")) > 0.9
+    assert float(stats["held_out_r2"].sel(parameter="M0")) > 0.7  # in the narrow second box
     first, second = (stats["box_high"] - stats["box_low"]).sel(parameter="M0").values
     assert second < 0.2 * first
 
@@ -144,8 +144,10 @@ def test_learnable_noise_scales_are_drawn_simulated_and_adjusted_like_parameters
     assert set(posterior.data_vars) == {"M0", "nu_TD"}
     assert (posterior["nu_TD"] >= 0).all() and (posterior["nu_TD"] <= 0.01).all()
     assert abs(float(posterior["M0"].mean()) - 1.37) < 3 * float(posterior["M0"].std())
-    box_sd = 0.3 / np.sqrt(12)  # the draws' range, widened by half of it on each side
+    box_sd = 0.18 / np.sqrt(12)  # the draws' range, widened by a tenth of it on each side
     assert float(posterior["M0"].std()) < 0.5 * box_sd
+    # the data are noise-free: the roughness summaries draw the second round's ν near 0
+    assert float(tree["sample_stats"]["box_high"].sel(parameter="nu_TD", round=1)) < 0.002
 
 
 def test_failures_are_counted_and_a_checkpoint_resumes_without_simulating(tmp_path):
@@ -171,7 +173,8 @@ def test_failures_are_counted_and_a_checkpoint_resumes_without_simulating(tmp_pa
 
 def test_the_box_widens_the_posterior_range_inside_the_prior_and_draws_stay_in_it():
     prior = UniformPrior({"x": (0.0, 10.0), "y": (0.0, 1.0)})
-    box = posterior_box(_posterior({"x": np.array([4.0, 6.0]), "y": np.array([0.1, 0.9])}), prior)
+    posterior = _posterior({"x": np.array([4.0, 6.0]), "y": np.array([0.1, 0.9])})
+    box = posterior_box(posterior, prior, widen=0.5)
     assert box == {"x": (3.0, 7.0), "y": (0.0, 1.0)}
     draws = draw_in_box(prior.names, box, 500, np.random.default_rng(0))
     assert draws.shape == (500, 2)
