@@ -5,9 +5,8 @@ import pytest
 import xarray as xr
 
 from pymc_vcc.inference.noise import SensorNoise, with_noise
-from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.priors import GMMPrior, UniformPrior
 from pymc_vcc.inference.regression import (
-    draw_in_box,
     posterior_box,
     regression_abc,
     regression_adjustment,
@@ -73,37 +72,6 @@ def test_few_accepted_draws_a_coefficient_keep_the_exact_spread():
     sd = np.sqrt(found.weights @ (found.adjusted - mean) ** 2)
     assert len(found.weights) == 60
     assert np.median(sd / exact_sd) == pytest.approx(1.0, abs=0.08)
-
-
-def test_prior_weights_give_the_exact_posterior_under_a_gaussian_prior():
-    """Draws uniform over a box, weighted by a N(0.52, 0.01) prior density: the adjusted draws
-    have the conjugate posterior, between the prior and the likelihood."""
-    rng = np.random.default_rng(4)
-    loadings = np.array([[1.0, -0.5, 2.0, 0.8]])
-    noise = 0.02
-    thetas = rng.uniform(0.3, 0.7, size=(20_000, 1))
-    features = thetas @ loadings + noise * rng.standard_normal((20_000, 4))
-    observed = np.array([0.48]) @ loadings + noise * rng.standard_normal(4)
-    prior_mean, prior_sd = 0.52, 0.01
-    log_prior = -0.5 * ((thetas[:, 0] - prior_mean) / prior_sd) ** 2
-    found = regression_adjustment(
-        thetas, features, observed, 0.0, 1.0, accept=0.2, log_prior=log_prior
-    )
-    data_precision = (loadings**2).sum() / noise**2
-    data_mean = (loadings @ observed).item() / (loadings**2).sum()
-    precision = data_precision + prior_sd**-2
-    exact_mean = (data_precision * data_mean + prior_mean / prior_sd**2) / precision
-    exact_sd = precision**-0.5
-    mean = found.weights @ found.adjusted[:, 0]
-    sd = np.sqrt(found.weights @ (found.adjusted[:, 0] - mean) ** 2)
-    assert mean == pytest.approx(exact_mean, abs=0.2 * exact_sd)
-    assert sd == pytest.approx(exact_sd, rel=0.15)
-    assert abs(data_mean - prior_mean) > 2 * exact_sd  # the prior moved the posterior
-    assert found.effective_size > 300
-    with pytest.raises(ValueError, match="the prior has no mass at any accepted draw"):
-        regression_adjustment(
-            thetas, features, observed, 0.0, 1.0, log_prior=np.full(20_000, -np.inf)
-        )
 
 
 def test_regression_abc_gives_the_exact_posterior_of_noisy_sensor_data():
@@ -176,11 +144,29 @@ def test_the_box_widens_the_posterior_range_inside_the_prior_and_draws_stay_in_i
     posterior = _posterior({"x": np.array([4.0, 6.0]), "y": np.array([0.1, 0.9])})
     box = posterior_box(posterior, prior, widen=0.5)
     assert box == {"x": (3.0, 7.0), "y": (0.0, 1.0)}
-    draws = draw_in_box(prior.names, box, 500, np.random.default_rng(0))
+    draws = prior.sample_in_box(box, 500, np.random.default_rng(0))
     assert draws.shape == (500, 2)
     assert (draws[:, 0] >= 3.0).all() and (draws[:, 0] <= 7.0).all()
     with pytest.raises(ValueError, match=r"lacks the prior's parameter\(s\) \['y'\]"):
         posterior_box(_posterior({"x": np.array([4.0])}), prior)
+
+
+def test_a_mixture_prior_is_drawn_inside_the_box_or_whole_when_the_box_holds_too_little():
+    """Dataset 2's prior is a Gaussian mixture: its draws inside the box follow it there; where
+    the box holds next to none of its mass, the round warns and draws from the whole prior."""
+    bounds = {"M0": PROBLEM.bounds["M0"]}
+    narrow = GMMPrior(bounds, np.array([1.0]), np.array([[-0.6]]), np.array([[[0.01]]]))
+    draws = narrow.sample_in_box({"M0": (1.30, 1.45)}, 2000, np.random.default_rng(0))
+    assert ((draws >= 1.30) & (draws <= 1.45)).all()
+    centre = narrow.sample(20_000, np.random.default_rng(1))
+    assert np.median(draws) == pytest.approx(np.median(centre), abs=0.005)  # inside the box
+    assert narrow.sample_in_box({"M0": (2.0, 2.1)}, 10, np.random.default_rng(0)) is None
+    far = _posterior({"M0": np.linspace(2.0, 2.1, 20)})
+    with pytest.warns(RuntimeWarning, match="this round draws from the whole prior"):
+        tree = regression_abc(
+            PROBLEM, narrow, far, PROBLEM.dataset(1.37), n=200, rounds=1, executor="serial"
+        )
+    assert float(tree["sample_stats"]["box_low"].item()) == bounds["M0"][0]
 
 
 def test_bad_settings_are_refused_before_any_simulation():

@@ -117,6 +117,16 @@ def check_prior_support(allowed: Bounds | None, bounds: Bounds) -> None:
             )
 
 
+MAX_BOX_TRIES = 2000
+"""Prior draws tried per wanted draw inside a box before giving up."""
+
+
+def _box_edges(
+    names: tuple[str, ...], box: Mapping[str, tuple[float, float]]
+) -> tuple[np.ndarray, np.ndarray]:
+    return np.array([box[name][0] for name in names]), np.array([box[name][1] for name in names])
+
+
 class Prior(ABC):
     """A distribution over named parameters inside physical bounds.
 
@@ -156,6 +166,24 @@ class Prior(ABC):
     @abstractmethod
     def logpdf(self, x: np.ndarray) -> np.ndarray:
         """Log-density at points x (n, d) or (d,) in physical units; −inf outside the bounds."""
+
+    def sample_in_box(
+        self, box: Mapping[str, tuple[float, float]], n: int, rng: np.random.Generator
+    ) -> np.ndarray | None:
+        """``n`` draws (n, d) of this prior restricted to ``box`` (name -> (low, high)), by
+        rejection; None if fewer than 1 in :data:`MAX_BOX_TRIES` draws falls inside."""
+        low, high = _box_edges(self.names, box)
+        kept: list[np.ndarray] = []
+        found, tried, batch = 0, 0, max(_check_count(n), 64)
+        while found < n:
+            if tried >= MAX_BOX_TRIES * n:
+                return None
+            draws = self.sample(batch, rng)
+            inside = draws[((draws >= low) & (draws <= high)).all(axis=1)]
+            kept.append(inside)
+            found += len(inside)
+            tried += batch
+        return np.concatenate(kept)[:n]
 
     @abstractmethod
     def to_dataset(self) -> xr.Dataset:
@@ -209,6 +237,14 @@ class UniformPrior(Prior):
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         return rng.uniform(self.lower, self.upper, size=(_check_count(n), self.ndim))
+
+    def sample_in_box(
+        self, box: Mapping[str, tuple[float, float]], n: int, rng: np.random.Generator
+    ) -> np.ndarray:
+        """Uniform draws on the box's overlap with the bounds (exact, however small the box)."""
+        low, high = _box_edges(self.names, box)
+        low, high = np.maximum(low, self.lower), np.minimum(high, self.upper)
+        return rng.uniform(low, high, size=(_check_count(n), self.ndim))
 
     def logpdf(self, x: np.ndarray) -> np.ndarray:
         points = self._points(x)

@@ -7,9 +7,10 @@ the posterior's place and spends its simulations on fresh, independent draws the
 
 1. **Box**: each parameter's range over the posterior draws, widened by ``widen`` of that range
    on each side and clipped to the prior's bounds.
-2. **Draws**: ``n`` draws uniform in the box, each weighted by its prior density (importance
-   sampling; equal weights under a uniform prior). The box drops only prior mass the posterior
-   does not reach, so the posterior is unchanged.
+2. **Draws**: ``n`` draws of the prior restricted to the box (the restriction drops only prior
+   mass the posterior does not reach, so the posterior is unchanged): uniform on the box under
+   a uniform prior, by rejection otherwise (dataset 2's Gaussian mixture; uniform draws
+   weighted by its density left one draw carrying all the weight in 35 dimensions).
 3. **Simulations**: noise-free and checkpointed (:func:`~pymc_vcc.inference.reference_table.
    simulate_draws`), then each draw's output noise: the paper's ν or learnable sensor scales
    σ among the draw's parameters, or known sensor noise.
@@ -22,8 +23,7 @@ the posterior's place and spends its simulations on fresh, independent draws the
    partial least squares with up to 30 components: held-out R² of M0 0.92 against 0.87 on
    dataset 1's noise-free draws.)
 5. **Rejection**: the ``accept`` fraction of draws whose summaries lie nearest the observed
-   ones (Euclidean, each summary over its parameter's spread), Epanechnikov weights times the
-   prior weights.
+   ones (Euclidean, each summary over its parameter's spread), Epanechnikov weights.
 6. **Adjustment**: weighted least squares of the parameters on the summaries' offsets from the
    observed ones; each accepted draw becomes the fit at the data plus its residual over
    sqrt(1 − leverage) (the raw residuals of d + 1 coefficients fitted to a few hundred draws
@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,7 +62,7 @@ from pymc_vcc.inference.noise import (
     noise_parameter,
     sensor_parameter,
 )
-from pymc_vcc.inference.priors import Prior
+from pymc_vcc.inference.priors import MAX_BOX_TRIES, Prior
 from pymc_vcc.inference.reference_table import simulate_draws
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
 from pymc_vcc.inference.simulator import Simulator
@@ -115,15 +115,6 @@ def posterior_box(
         margin = widen * (most - least)
         box[name] = (max(low, least - margin), min(high, most + margin))
     return box
-
-
-def draw_in_box(
-    names: tuple[str, ...], box: Mapping[str, tuple[float, float]], n: int, rng: np.random.Generator
-) -> np.ndarray:
-    """``n`` draws (n, d) uniform in ``box`` (name -> (low, high)), columns in ``names`` order."""
-    low = np.array([box[name][0] for name in names])
-    high = np.array([box[name][1] for name in names])
-    return rng.uniform(low, high, size=(int(n), len(names)))
 
 
 def check_draws(n: int, dimensions: int, accept: float) -> int:
@@ -215,12 +206,10 @@ def regression_adjustment(
     upper: np.ndarray,
     *,
     accept: float = ACCEPT,
-    log_prior: np.ndarray | None = None,
 ) -> Adjustment:
     """Semi-automatic summaries, rejection and local-linear adjustment (module docstring, steps
     4–6) of draws ``thetas`` (N, d) inside ``lower``/``upper`` with ``features`` (N, F) of their
-    simulations and ``observed_features`` (F,) of the data; ``log_prior`` (N,) is each draw's
-    log prior density over its proposal's (None: all equal)."""
+    simulations and ``observed_features`` (F,) of the data."""
     thetas = np.asarray(thetas, dtype=float)
     features = np.asarray(features, dtype=float)
     n, d = thetas.shape
@@ -245,11 +234,6 @@ def regression_adjustment(
     nearest = np.argsort(distance, kind="stable")[:n_accept]
     bandwidth = float(distance[nearest[-1]]) * (1 + 1e-9) + 1e-300
     weights = 1 - (distance[nearest] / bandwidth) ** 2
-    if log_prior is not None:
-        accepted_log_prior = np.asarray(log_prior, dtype=float)[nearest]
-        if not np.isfinite(accepted_log_prior).any():
-            raise ValueError("the prior has no mass at any accepted draw (a box outside it?)")
-        weights = weights * np.exp(accepted_log_prior - accepted_log_prior.max())
     weights /= weights.sum()
     design = np.column_stack([np.ones(n_accept), offsets[nearest]])
     root = np.sqrt(weights)[:, np.newaxis]
@@ -332,7 +316,16 @@ def _regression_round(
     """One round (module docstring, steps 1–6)."""
     box_seed, noise_seed, simulation_seed, resample_seed = seed.spawn(4)
     box = posterior_box(posterior, prior, widen)
-    draws = draw_in_box(prior.names, box, n, np.random.default_rng(box_seed))
+    draws = prior.sample_in_box(box, n, np.random.default_rng(box_seed))
+    if draws is None:
+        warnings.warn(
+            f"the prior puts less than 1/{MAX_BOX_TRIES} of its mass in the posterior's box; "
+            "this round draws from the whole prior",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        box = prior.bounds
+        draws = prior.sample(n, np.random.default_rng(box_seed))
     model = tuple(name for name in prior.names if not is_noise_parameter(name))
     columns = [prior.names.index(name) for name in model]
     table = simulate_draws(
@@ -365,7 +358,6 @@ def _regression_round(
         prior.lower,
         prior.upper,
         accept=accept,
-        log_prior=prior.logpdf(draws[finished]),
     )
     rng = np.random.default_rng(resample_seed)
     size = len(adjustment.weights)
