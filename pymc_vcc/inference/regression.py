@@ -76,7 +76,7 @@ RIDGE_PENALTIES = np.logspace(-4, 4, 17)
 WIDEN = 0.1
 """Default margin of the box on each side, in ranges of the posterior draws. The range of a few
 hundred draws spans ~6 sd already; on dataset 1 a margin of 0.1 gave M0 and CF_VOL sd ratios
-of 0.11–0.15 where 0.5 (a box ~11 sd wide, the summaries less local) gave 0.26–0.35."""
+of 0.05–0.16 where 0.5 (a box ~11 sd wide, the summaries less local) gave 0.20–0.35."""
 
 ACCEPT = 0.1
 """Default fraction of a round's draws kept, nearest in summaries to the data."""
