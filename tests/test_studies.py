@@ -186,6 +186,20 @@ def test_estimate_with_smc_mh_cvode_and_the_windowed_distance(tmp_path, capsys, 
     assert (out / "fig5_kde_dataset1.png").exists()
 
 
+def _exact_sequential_posteriors(problem, noise, observed, grid):
+    """(mean, sd) of M0 after each dataset, on a grid of the flat prior (the exact posteriors)."""
+    log_p = np.zeros_like(grid)
+    moments = []
+    for data in observed:
+        prepared = prepare_observed(data, None, problem.output_names)
+        resolved = noise.resolve(prepared)
+        log_p += [log_likelihood(prepared.values, problem.outputs(m), resolved) for m in grid]
+        weights = np.exp(log_p - log_p.max())
+        mean = np.average(grid, weights=weights)
+        moments.append((mean, np.sqrt(np.average((grid - mean) ** 2, weights=weights))))
+    return moments
+
+
 def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stage(quiet_pymc):
     """Dataset 2, calibrated from dataset 1's GMM posterior, has the posterior of both (each
     tempered from its fit's Laplace approximation)."""
@@ -207,15 +221,8 @@ def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stag
             likelihood=True,
             fit_starts=1,
         )
-    grid = np.linspace(1.2, 1.4, 4001)  # the exact posteriors, on a grid of the flat prior
-    log_p = np.zeros_like(grid)
-    for tree, data in zip(result.trees, observed, strict=True):
-        prepared = prepare_observed(data, None, problem.output_names)
-        resolved = noise.resolve(prepared)
-        log_p += [log_likelihood(prepared.values, problem.outputs(m), resolved) for m in grid]
-        weights = np.exp(log_p - log_p.max())
-        mean = np.average(grid, weights=weights)
-        sd = np.sqrt(np.average((grid - mean) ** 2, weights=weights))
+    exact = _exact_sequential_posteriors(problem, noise, observed, np.linspace(1.2, 1.4, 4001))
+    for tree, (mean, sd) in zip(result.trees, exact, strict=True):
         draws = tree["posterior"]["M0"].values.ravel()
         assert draws.mean() == pytest.approx(mean, abs=0.1 * sd)
         assert draws.std() == pytest.approx(sd, rel=0.1)
@@ -242,16 +249,9 @@ def test_sequential_smc_with_refine_gives_each_stage_the_exact_posterior(quiet_p
             sensor_noise=noise,
             refine=6000,
         )
-    grid = np.linspace(1.1, 1.5, 8001)  # the exact posteriors, on a grid of the flat prior
-    log_p = np.zeros_like(grid)
+    exact = _exact_sequential_posteriors(problem, noise, observed, np.linspace(1.1, 1.5, 8001))
     spreads = []
-    for tree, data in zip(result.trees, observed, strict=True):
-        prepared = prepare_observed(data, None, problem.output_names)
-        resolved = noise.resolve(prepared)
-        log_p += [log_likelihood(prepared.values, problem.outputs(m), resolved) for m in grid]
-        weights = np.exp(log_p - log_p.max())
-        mean = np.average(grid, weights=weights)
-        sd = np.sqrt(np.average((grid - mean) ** 2, weights=weights))
+    for tree, (mean, sd) in zip(result.trees, exact, strict=True):
         draws = tree["posterior"]["M0"].values.ravel()
         assert draws.mean() == pytest.approx(mean, abs=0.4 * sd)  # measured: |z| <= 0.32
         assert draws.std() == pytest.approx(sd, rel=0.15)
