@@ -200,28 +200,33 @@ def _exact_sequential_posteriors(problem, noise, observed, grid):
     return moments
 
 
-def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stage(quiet_pymc):
-    """Dataset 2, calibrated from dataset 1's GMM posterior, has the posterior of both (each
-    tempered from its fit's Laplace approximation)."""
+def _two_sensor_datasets(data_seed, seed, grid, **options):
+    """The sensor problem's sequential calibration of two noisy datasets at M0 = 1.3 kg, and
+    the exact (mean, sd) of M0 after each, on ``grid``."""
     problem = SensorProblem()
     noise = SensorNoise.typical()
-    rng = np.random.default_rng(5)
+    rng = np.random.default_rng(data_seed)
     observed = [noise.measure(problem.dataset(1.3), rng) for _ in range(2)]
     with make_executor("serial") as executor:
         result = smc_sequential_calibration(
             problem,
             UniformPrior(problem.bounds),
             observed,
-            draws=600,
-            epsilon=0.01,
             executor=executor,
             settings=StudySettings(executor="serial"),
-            seed=np.random.SeedSequence(0),
+            seed=np.random.SeedSequence(seed),
             sensor_noise=noise,
-            likelihood=True,
-            fit_starts=1,
+            **options,
         )
-    exact = _exact_sequential_posteriors(problem, noise, observed, np.linspace(1.2, 1.4, 4001))
+    return result, _exact_sequential_posteriors(problem, noise, observed, grid)
+
+
+def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stage(quiet_pymc):
+    """Dataset 2, calibrated from dataset 1's GMM posterior, has the posterior of both (each
+    tempered from its fit's Laplace approximation)."""
+    result, exact = _two_sensor_datasets(
+        5, 0, np.linspace(1.2, 1.4, 4001), draws=600, epsilon=0.01, likelihood=True, fit_starts=1
+    )
     for tree, (mean, sd) in zip(result.trees, exact, strict=True):
         draws = tree["posterior"]["M0"].values.ravel()
         assert draws.mean() == pytest.approx(mean, abs=0.1 * sd)
@@ -232,24 +237,9 @@ def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stag
 def test_sequential_smc_with_refine_gives_each_stage_the_exact_posterior(quiet_pymc, tmp_path):
     """SMC-ABC on the KS distance only locates each posterior; the regression stage on fresh
     draws around it gives the exact one, and dataset 2 (from dataset 1's GMM) is tighter."""
-    problem = SensorProblem()
-    noise = SensorNoise.typical()
-    rng = np.random.default_rng(7)
-    observed = [noise.measure(problem.dataset(1.3), rng) for _ in range(2)]
-    with make_executor("serial") as executor:
-        result = smc_sequential_calibration(
-            problem,
-            UniformPrior(problem.bounds),
-            observed,
-            draws=200,
-            epsilon=0.05,
-            executor=executor,
-            settings=StudySettings(executor="serial"),
-            seed=np.random.SeedSequence(1),
-            sensor_noise=noise,
-            refine=6000,
-        )
-    exact = _exact_sequential_posteriors(problem, noise, observed, np.linspace(1.1, 1.5, 8001))
+    result, exact = _two_sensor_datasets(
+        7, 1, np.linspace(1.1, 1.5, 8001), draws=200, epsilon=0.05, refine=6000
+    )
     spreads = []
     for tree, (mean, sd) in zip(result.trees, exact, strict=True):
         draws = tree["posterior"]["M0"].values.ravel()
