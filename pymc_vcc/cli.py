@@ -120,6 +120,7 @@ def _estimate(args: argparse.Namespace) -> int:
         kernel=args.kernel,
         fit_starts=args.fit_starts,
         refine=args.refine,
+        drift=args.drift,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations "
@@ -362,6 +363,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pymc-vcc``, one sub-command per job."""
     from pymc_vcc.inference.distances import BATCH_DISTANCES
+    from pymc_vcc.studies.estimate import REFERENCE_STEP
 
     parser = argparse.ArgumentParser(
         prog="pymc-vcc",
@@ -443,6 +445,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="smc: after each dataset's SMC-ABC, this many new simulations around its posterior, "
         "over two rounds, for regression-adjusted ABC (learnt summaries, local-linear "
         "adjustment), whose posterior replaces it (default 0: none)",
+    )
+    estimate.add_argument(
+        "--drift",
+        type=float,
+        default=REFERENCE_STEP,
+        metavar="FRACTION",
+        help="the step of each parameter between the datasets that dataset 2's prior allows: "
+        "the sd of a normal step, in fractions of each range (default %(default)s, the step "
+        "the second reference parameters took; 0: dataset 1's posterior as it is, the paper's)",
     )
     estimate.set_defaults(handler=_estimate)
 

@@ -192,3 +192,74 @@ def test_gmm_transfer_keeps_marginal_means_and_sds_within_five_hundredths_of_an_
     sd = samples.std(axis=0, ddof=1)
     assert np.all(np.abs(draws.mean(axis=0) - samples.mean(axis=0)) <= 0.05 * sd)
     assert np.all(np.abs(draws.std(axis=0) - sd) <= 0.05 * sd)
+
+
+def test_a_diagonal_mixture_is_drawn_exactly_inside_a_box_however_little_it_holds():
+    """Two components: the draws inside a box follow the mixture there (as rejection's do),
+    and in 35 dimensions a box holding ~1e-590 of the mass (8.5 sd out in each) is drawn
+    without a miss."""
+    prior = GMMPrior(
+        {"a": (0.0, 1.0), "b": (0.0, 10.0)},
+        np.array([0.3, 0.7]),
+        np.array([[0.0, 0.0], [2.0, -1.0]]),
+        np.array([np.diag([1.0, 0.25]), np.diag([0.5, 2.0])]),
+    )
+    assert prior.is_diagonal
+    box = {"a": (0.4, 0.9), "b": (1.0, 5.0)}
+    rng = np.random.default_rng(0)
+    exact = prior.sample_in_box(box, 20_000, rng)
+    tried = prior.sample(400_000, rng)
+    inside = tried[((tried >= [0.4, 1.0]) & (tried <= [0.9, 5.0])).all(axis=1)]
+    for j in range(2):
+        assert stats.ks_2samp(exact[:, j], inside[:, j]).pvalue > 0.01
+    d = 35
+    narrow = GMMPrior(
+        {f"p{j}": (0.0, 1.0) for j in range(d)},
+        np.ones(1),
+        np.zeros((1, d)),
+        0.01 * np.eye(d)[None],
+    )
+    far = narrow.sample_in_box({f"p{j}": (0.7, 0.75) for j in range(d)}, 4000, rng)
+    assert ((far >= 0.7) & (far <= 0.75)).all()
+    # each logit is its normal truncated to [logit 0.7, logit 0.75]: ~8.5 sd out, mean near the edge
+    edges = logit(np.array([0.7, 0.75])) / 0.1
+    expected = expit(0.1 * stats.truncnorm(*edges).mean())
+    assert np.median(far) == pytest.approx(expected, abs=0.002)
+    assert (
+        narrow.sample_in_box({"p0": (1.0, 1.0)} | {f"p{j}": (0, 1) for j in range(1, d)}, 5, rng)
+        is None
+    )
+
+
+def test_a_full_covariance_mixture_is_drawn_in_a_box_by_rejection():
+    correlated = GMMPrior(
+        BOUNDS, np.ones(1), np.zeros((1, 2)), np.array([[[1.0, 0.9], [0.9, 1.0]]])
+    )
+    assert not correlated.is_diagonal
+    rng = np.random.default_rng(1)
+    box = {"M0": (1.4, 1.8), "CF_VOL": (0.8, 1.2)}
+    draws = correlated.sample_in_box(box, 1000, rng)
+    assert draws.shape == (1000, 2)
+    assert ((draws >= [1.4, 0.8]) & (draws <= [1.8, 1.2])).all()
+    assert correlated.sample_in_box({"M0": (2.19, 2.2), "CF_VOL": (0.5, 0.51)}, 10, rng) is None
+
+
+def test_a_drift_widens_the_fitted_prior_by_the_step_the_parameters_may_take():
+    """Samples at one point, moved by a 5 %-of-range step before the fit: the prior's sd is
+    the step's (the sample's own spread is 100 times smaller); an undrifted parameter keeps
+    the samples' spread."""
+    rng = np.random.default_rng(2)
+    samples = np.column_stack(
+        [1.5 + 1e-4 * rng.standard_normal(400), 1.0 + 1e-3 * rng.standard_normal(400)]
+    )
+    prior = GMMPrior.fit(samples, BOUNDS, seed=3, drift={"M0": 0.05})
+    draws = prior.sample(100_000, rng)
+    assert draws[:, 0].std() == pytest.approx(0.05 * 1.3, rel=0.1)
+    assert draws[:, 0].mean() == pytest.approx(1.5, abs=0.01)
+    assert draws[:, 1].std() == pytest.approx(1e-3, rel=0.15)
+    same = GMMPrior.fit(samples, BOUNDS, seed=3, drift=0.0)
+    assert same.sample(100_000, rng)[:, 0].std() == pytest.approx(1e-4, rel=0.15)
+    with pytest.raises(ValueError, match=r"drift names parameter\(s\) \['L_COND'\]"):
+        GMMPrior.fit(samples, BOUNDS, drift={"L_COND": 0.1})
+    with pytest.raises(ValueError, match=r"drift of 'M0' must be a finite fraction >= 0"):
+        GMMPrior.fit(samples, BOUNDS, drift=-0.1)

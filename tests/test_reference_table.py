@@ -98,6 +98,37 @@ def test_a_checkpointed_table_resumes_without_simulating(tmp_path, monkeypatch):
         )
 
 
+def test_an_interrupted_table_keeps_every_finished_simulation_in_few_files(tmp_path, monkeypatch):
+    """Simulations finished within 2 s share a chunk file, and an interrupted run writes the
+    ones it holds before it stops: the run started again simulates only the rest."""
+    simulate = SensorProblem.__call__
+    calls = []
+
+    def interrupted(self, theta, rng):
+        if len(calls) == 70:
+            raise KeyboardInterrupt
+        calls.append(theta)
+        return simulate(self, theta, rng)
+
+    monkeypatch.setattr(SensorProblem, "__call__", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        table(5, checkpoint=tmp_path / "table")
+    (chunk,) = (tmp_path / "table").glob("chunk-*.npz")  # not one file per simulation
+    with np.load(chunk) as saved:
+        stored = saved["index"].size
+    assert stored >= SIZES["n_pilot"]  # all but the executor's unfinished batch
+    calls.clear()
+    monkeypatch.setattr(
+        SensorProblem,
+        "__call__",
+        lambda self, theta, rng: (calls.append(theta), simulate(self, theta, rng))[1],
+    )
+    again = table(5, checkpoint=tmp_path / "table")
+    assert len(calls) == SIZES["n_pilot"] + SIZES["n_main"] - stored
+    for phase, values in table(5).values.items():
+        np.testing.assert_array_equal(again.values[phase], values)
+
+
 def test_observed_data_off_the_tables_grid_are_refused():
     with pytest.raises(ValueError, match="differ from the table's"):
         table_rejection(table(1), SensorProblem(n_time=30).dataset(1.5), quantile=0.2, n_desired=5)

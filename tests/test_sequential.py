@@ -55,6 +55,25 @@ def test_keeping_the_uniform_prior_runs_independent_stages_with_the_stage_seeds(
     assert not np.array_equal(result[0].prior["mu"].values, result[1].prior["mu"].values)
 
 
+def test_a_drift_widens_each_next_prior_by_the_step_of_its_parameters():
+    """Three datasets with ``drift``: each fitted prior is the last posterior widened by the
+    step (here 0.1 of the range of mu, sd 0.2 against a posterior sd of ~0.2)."""
+    options = dict(distance=MODEL.distance, seed=3, **(BUDGET | {"n_main": 1000, "n_desired": 200}))
+    datasets = _datasets(3, seed=2)
+    still, drifting = (
+        sequential_calibration(MODEL, UniformPrior(MODEL.bounds), datasets, drift=d, **options)
+        for d in (0.0, 0.1)
+    )
+    rng = np.random.default_rng(0)
+    for k in (1, 2):
+        posterior_sd = drifting[k - 1].posterior["mu"].values.std()
+        widened = drifting.priors[k].sample(50_000, rng)[:, 0].std()
+        assert widened == pytest.approx(np.hypot(posterior_sd, 0.2), rel=0.15)
+    assert still.priors[1].sample(50_000, rng)[:, 0].std() == pytest.approx(
+        still[0].posterior["mu"].values.std(), rel=0.1
+    )
+
+
 def test_results_with_noise_scales_save_and_reload_with_their_priors(tmp_path):
     result = sequential_calibration(
         MODEL,

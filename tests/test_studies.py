@@ -11,6 +11,7 @@ import time
 import numpy as np
 import pytest
 import xarray as xr
+from scipy.ndimage import gaussian_filter1d
 
 from pymc_vcc.cli import main
 from pymc_vcc.execution.executors import make_executor
@@ -186,11 +187,18 @@ def test_estimate_with_smc_mh_cvode_and_the_windowed_distance(tmp_path, capsys, 
     assert (out / "fig5_kde_dataset1.png").exists()
 
 
-def _exact_sequential_posteriors(problem, noise, observed, grid):
-    """(mean, sd) of M0 after each dataset, on a grid of the flat prior (the exact posteriors)."""
+def _exact_sequential_posteriors(observed, grid, drift=0.0):
+    """(mean, sd) of the sensor problem's M0 after each dataset of ``observed`` (typical sensor
+    noise), on a grid of the flat prior (the exact posteriors), M0 taking a normal step of sd
+    ``drift`` × its range between datasets."""
+    problem, noise = SensorProblem(), SensorNoise.typical()
+    (low, high), spacing = problem.bounds["M0"], grid[1] - grid[0]
     log_p = np.zeros_like(grid)
     moments = []
-    for data in observed:
+    for k, data in enumerate(observed):
+        if k and drift:
+            spread = gaussian_filter1d(np.exp(log_p - log_p.max()), drift * (high - low) / spacing)
+            log_p = np.log(np.maximum(spread, 1e-300))
         prepared = prepare_observed(data, None, problem.output_names)
         resolved = noise.resolve(prepared)
         log_p += [log_likelihood(prepared.values, problem.outputs(m), resolved) for m in grid]
@@ -200,13 +208,13 @@ def _exact_sequential_posteriors(problem, noise, observed, grid):
     return moments
 
 
-def _two_sensor_datasets(data_seed, seed, grid, **options):
-    """The sensor problem's sequential calibration of two noisy datasets at M0 = 1.3 kg, and
-    the exact (mean, sd) of M0 after each, on ``grid``."""
+def _two_sensor_datasets(data_seed, seed, charges=(1.3, 1.3), **options):
+    """The sensor problem's sequential calibration of two noisy datasets at M0 = ``charges``
+    (kg), and the datasets."""
     problem = SensorProblem()
     noise = SensorNoise.typical()
     rng = np.random.default_rng(data_seed)
-    observed = [noise.measure(problem.dataset(1.3), rng) for _ in range(2)]
+    observed = [noise.measure(problem.dataset(charge), rng) for charge in charges]
     with make_executor("serial") as executor:
         result = smc_sequential_calibration(
             problem,
@@ -218,15 +226,16 @@ def _two_sensor_datasets(data_seed, seed, grid, **options):
             sensor_noise=noise,
             **options,
         )
-    return result, _exact_sequential_posteriors(problem, noise, observed, grid)
+    return result, observed
 
 
 def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stage(quiet_pymc):
     """Dataset 2, calibrated from dataset 1's GMM posterior, has the posterior of both (each
     tempered from its fit's Laplace approximation)."""
-    result, exact = _two_sensor_datasets(
-        5, 0, np.linspace(1.2, 1.4, 4001), draws=600, epsilon=0.01, likelihood=True, fit_starts=1
+    result, observed = _two_sensor_datasets(
+        5, 0, draws=600, epsilon=0.01, likelihood=True, fit_starts=1
     )
+    exact = _exact_sequential_posteriors(observed, np.linspace(1.2, 1.4, 4001))
     for tree, (mean, sd) in zip(result.trees, exact, strict=True):
         draws = tree["posterior"]["M0"].values.ravel()
         assert draws.mean() == pytest.approx(mean, abs=0.1 * sd)
@@ -234,12 +243,28 @@ def test_the_sequential_likelihood_path_matches_the_exact_posterior_of_each_stag
     assert result.trees[1]["prior"]["M0"].size == 600
 
 
+def test_a_drifting_charge_gets_the_posterior_of_a_parameter_that_moved(quiet_pymc):
+    """With ``drift``, dataset 2's prior is dataset 1's posterior widened by the step M0 may
+    have taken (here 50 g of charge lost between the datasets): its posterior is the exact one
+    of that random walk, not the narrower one of an unchanged charge."""
+    result, observed = _two_sensor_datasets(
+        5, 0, (1.3, 1.25), draws=600, epsilon=0.01, likelihood=True, fit_starts=1, drift=0.02
+    )
+    grid = np.linspace(1.1, 1.5, 8001)
+    (mean, sd), (unchanged_mean, unchanged_sd) = (
+        _exact_sequential_posteriors(observed, grid, drift)[1] for drift in (0.02, 0.0)
+    )
+    assert abs(mean - unchanged_mean) > 2 * sd and sd > 1.3 * unchanged_sd  # they differ
+    draws = result.trees[1]["posterior"]["M0"].values.ravel()
+    assert draws.mean() == pytest.approx(mean, abs=0.1 * sd)
+    assert draws.std() == pytest.approx(sd, rel=0.1)
+
+
 def test_sequential_smc_with_refine_gives_each_stage_the_exact_posterior(quiet_pymc, tmp_path):
     """SMC-ABC on the KS distance only locates each posterior; the regression stage on fresh
     draws around it gives the exact one, and dataset 2 (from dataset 1's GMM) is tighter."""
-    result, exact = _two_sensor_datasets(
-        7, 1, np.linspace(1.1, 1.5, 8001), draws=200, epsilon=0.05, refine=6000
-    )
+    result, observed = _two_sensor_datasets(7, 1, draws=200, epsilon=0.05, refine=6000)
+    exact = _exact_sequential_posteriors(observed, np.linspace(1.1, 1.5, 8001))
     spreads = []
     for tree, (mean, sd) in zip(result.trees, exact, strict=True):
         draws = tree["posterior"]["M0"].values.ravel()
@@ -270,6 +295,17 @@ def test_estimate_refines_smc_only(tmp_path, capsys):
         main(["estimate", "--budget", "smoke", "--out", str(tmp_path / "e"), "--refine", "10"]) == 2
     )
     assert "refine applies to method='smc' only" in capsys.readouterr().err
+
+
+def test_estimate_refuses_a_drift_outside_zero_to_one_before_any_work(tmp_path, capsys):
+    for drift in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="drift must be a fraction of each range in"):
+            estimation_study(StudySettings(budget="smoke", out=tmp_path / "e"), drift=drift)
+    assert (
+        main(["estimate", "--budget", "smoke", "--out", str(tmp_path / "e"), "--drift", "2"]) == 2
+    )
+    assert "drift must be a fraction of each range in [0, 1], got 2.0" in capsys.readouterr().err
+    assert not (tmp_path / "e" / "checkpoints").exists()
 
 
 def test_estimate_refuses_an_unknown_distance_before_any_work(tmp_path):

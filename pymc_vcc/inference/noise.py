@@ -111,6 +111,13 @@ def is_noise_parameter(name: str) -> bool:
     return name.startswith((NOISE_PREFIX, SENSOR_PREFIX))
 
 
+def model_drift(prior: Prior, drift: float) -> dict[str, float]:
+    """``drift`` for each of the prior's model parameters, none for its noise scales (the
+    sensors do not change with the unit): the ``drift`` of
+    :meth:`~pymc_vcc.inference.priors.GMMPrior.fit`."""
+    return {name: drift for name in prior.names if not is_noise_parameter(name)}
+
+
 def sensor_parameter(output: str) -> str:
     """Name of the learnable sensor-noise scale of an output: ``sigma_<output>``."""
     return f"{SENSOR_PREFIX}{output}"

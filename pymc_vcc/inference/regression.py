@@ -8,9 +8,10 @@ the posterior's place and spends its simulations on fresh, independent draws the
 1. **Box**: each parameter's range over the posterior draws, widened by ``widen`` of that range
    on each side and clipped to the prior's bounds.
 2. **Draws**: ``n`` draws of the prior restricted to the box (the restriction drops only prior
-   mass the posterior does not reach, so the posterior is unchanged): uniform on the box under
-   a uniform prior, by rejection otherwise (dataset 2's Gaussian mixture; uniform draws
-   weighted by its density left one draw carrying all the weight in 35 dimensions).
+   mass the posterior does not reach, so the posterior is unchanged), exact under a uniform
+   prior and a mixture of diagonal Gaussians (dataset 2's: its second round's box held
+   1e-22 of its mass), by rejection otherwise (uniform draws weighted by the mixture's density
+   left one draw carrying all the weight in 35 dimensions).
 3. **Simulations**: noise-free and checkpointed (:func:`~pymc_vcc.inference.reference_table.
    simulate_draws`), then each draw's output noise: the paper's ν or learnable sensor scales
    σ among the draw's parameters, or known sensor noise.

@@ -19,7 +19,7 @@ import xarray as xr
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, executor_scope
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
-from pymc_vcc.inference.noise import SensorNoise, extended_prior, with_noise
+from pymc_vcc.inference.noise import SensorNoise, extended_prior, model_drift, with_noise
 from pymc_vcc.inference.priors import GMMPrior, Prior, prior_from_dataset
 from pymc_vcc.inference.rejection import abc_rejection, split_seed
 from pymc_vcc.inference.series import OutputData, prepare_observed
@@ -113,6 +113,7 @@ def sequential_calibration(
     *,
     keep_uniform: bool = False,
     max_components: int = 5,
+    drift: float = 0.0,
     n_pilot: int = 5000,
     quantile: float = 0.05,
     n_main: int = 80000,
@@ -138,6 +139,9 @@ def sequential_calibration(
         datasets: observed outputs of each dataset, in calibration order.
         keep_uniform: use ``first_prior`` at every stage instead of the fitted GMM.
         max_components: most GMM components tried (chosen by BIC).
+        drift: how far each of ``first_prior``'s parameters may move between datasets, the sd
+            of a normal step in fractions of its range, allowed by each fitted prior
+            (:meth:`~pymc_vcc.inference.priors.GMMPrior.fit`; 0: the posterior as it is).
         checkpoint: folder for one checkpoint per dataset (``dataset_k.sqlite``); a restarted
             run resumes where it stopped.
         seed: the stages use its children ``SeedSequence.spawn`` style, one per dataset.
@@ -173,6 +177,7 @@ def sequential_calibration(
                     priors[0],
                     max_components=max_components,
                     seed=int(stage_seeds[k].generate_state(1)[0]),
+                    drift=model_drift(first_prior, drift),
                 )
             priors.append(prior)
             trees.append(

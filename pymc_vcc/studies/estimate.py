@@ -4,7 +4,8 @@ Two reference parameter sets are drawn from the Table III box, the second a smal
 from the first (system-to-system variability or slow drift). Each drives the model over the
 2120 s input profile; the first 1060 s are the calibration data. Dataset 1 is calibrated for
 all 26 parameters and the output-noise scales with a uniform prior, dataset 2 with the Gaussian
-mixture fitted to dataset 1's posterior (Algorithm 1). Posterior predictives cover the whole
+mixture fitted to dataset 1's posterior (Algorithm 1), each of its draws first moved by the step
+the parameters may have taken (``drift``, by default the step between the two truths). Posterior predictives cover the whole
 2120 s, without the output noise (their bands show what the parameters leave uncertain, not
 the jagged median of noisy draws), against the measured data (the reference runs, with the
 sensor noise if given), and dataset 2 is also simulated with dataset 1's true parameters (the
@@ -34,7 +35,7 @@ import xarray as xr
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.distances import BATCH_DISTANCES, BatchDistance, ks_distances
 from pymc_vcc.inference.identifiability import Direction, Identifiability, identifiability
-from pymc_vcc.inference.noise import SensorNoise, with_noise
+from pymc_vcc.inference.noise import SensorNoise, model_drift, with_noise
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
 from pymc_vcc.inference.pymc.laplace import fit_reference
@@ -62,6 +63,12 @@ from pymc_vcc.studies.common import (
 
 SENSITIVE = ("M0", "CF_VOL", "CF_POW", "CF_PREF", "CF_LEV")
 """Parameters the paper found well identified (Fig. 5), shown first in the KDE figures."""
+
+REFERENCE_STEP = 0.03
+"""The second reference parameters' step from the first: a normal step's sd in fractions of each
+range. It is also the drift dataset 2's prior allows by default: with a dataset-1 posterior far
+narrower than the step (CF_LEV's sd is ~0.002 of the prior's), a prior without it misses the
+second truth (8 of 26 truths inside on a refined run)."""
 
 REFINE_ACCEPT = 0.05
 """Fraction of the regression stage's draws kept (dataset 1, 5000 draws a round, three runs: M0
@@ -202,7 +209,7 @@ def _sd_along(tree: xr.DataTree, found: Identifiability) -> list[float]:
 
 
 def draw_reference_parameters(
-    unit: Unit, rng: np.random.Generator, step: float = 0.03, margin: float = 0.25
+    unit: Unit, rng: np.random.Generator, step: float = REFERENCE_STEP, margin: float = 0.25
 ) -> tuple[dict[str, float], dict[str, float]]:
     """Two parameter sets: one from the inner box (``margin`` of each range kept clear of the
     bounds), and a second moved from it by ``step`` of each range (normal, clipped)."""
@@ -258,6 +265,7 @@ def smc_sequential_calibration(
     kernel: SmcKernel = "imh",
     fit_starts: int = 0,
     refine: int = 0,
+    drift: float = 0.0,
 ) -> SequentialResult:
     """Algorithm 1 with tempered SMC: each dataset's posterior, fitted by a Gaussian mixture, is
     the next dataset's prior. SMC-ABC on ``distance`` (default the paper's KS), or with
@@ -270,14 +278,22 @@ def smc_sequential_calibration(
     :data:`~pymc_vcc.inference.regression.ROUNDS` rounds) around each SMC posterior
     (:func:`~pymc_vcc.inference.regression.regression_abc`) gives the posterior; the
     SMC one is kept as group ``smc_posterior`` and the stage's statistics as
-    ``regression_stats``. Each tree also gets a ``prior`` group of ``draws`` prior draws."""
+    ``regression_stats``. Each tree also gets a ``prior`` group of ``draws`` prior draws.
+    ``drift``: each model parameter's step between datasets the next prior allows (sd in
+    fractions of its range; :meth:`~pymc_vcc.inference.priors.GMMPrior.fit`)."""
     trees: list[xr.DataTree] = []
     priors: list[Prior] = []
     for k, (observed, stage_seed) in enumerate(
         zip(datasets, seed.spawn(len(datasets)), strict=True)
     ):
         sampler_seed, prior_seed = (int(x) for x in stage_seed.generate_state(2))
-        prior = first_prior if k == 0 else GMMPrior.fit(trees[-1], first_prior, seed=prior_seed)
+        prior = (
+            first_prior
+            if k == 0
+            else GMMPrior.fit(
+                trees[-1], first_prior, seed=prior_seed, drift=model_drift(first_prior, drift)
+            )
+        )
         with pm.Model():
             add_observed_node(
                 simulator,
@@ -365,6 +381,7 @@ def estimation_study(
     kernel: SmcKernel = "imh",
     fit_starts: int = 0,
     refine: int = 0,
+    drift: float = REFERENCE_STEP,
 ) -> EstimationResult:
     """Sequential calibration of all 26 parameters on two simulated datasets (Figs. 5 to 8).
 
@@ -394,6 +411,9 @@ def estimation_study(
         refine: ``"smc"``: after each dataset's SMC-ABC, this many new simulations around its
             posterior (over two rounds) for regression-adjusted ABC, whose posterior replaces
             it (0: none).
+        drift: the step of each parameter between the datasets dataset 2's prior allows, the
+            sd of a normal step in fractions of each range (default: the step the second
+            reference parameters took; 0: the paper's prior, dataset 1's posterior as it is).
     """
     if method not in SAMPLERS:
         raise ValueError(f"method must be one of {list(SAMPLERS)}, got {method!r}")
@@ -416,6 +436,8 @@ def estimation_study(
             f"refine applies to method='smc' only (it starts from an SMC-ABC posterior), got "
             f"method={method!r}"
         )
+    if not (np.isfinite(drift) and 0.0 <= drift <= 1.0):
+        raise ValueError(f"drift must be a fraction of each range in [0, 1], got {drift!r}")
     if likelihood and sensor_noise is None:
         raise ValueError(
             "method='likelihood' needs a sensor_noise (the likelihood of noise-free data is "
@@ -473,6 +495,7 @@ def estimation_study(
                 kernel=kernel,
                 fit_starts=fit_starts,
                 refine=int(refine),
+                drift=drift,
             )
         else:
             calibration = sequential_calibration(
@@ -485,6 +508,7 @@ def estimation_study(
                 executor=executor,
                 checkpoint=settings.checkpoint_folder("estimate"),
                 seed=sampler_seed,
+                drift=drift,
                 **settings.rejection_options(),
             )
         predictive = [
