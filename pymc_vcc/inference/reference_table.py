@@ -120,8 +120,8 @@ class _TableTask:
 
 
 CHUNK_SECONDS = 2.0
-"""Longest a finished simulation waits in memory before its chunk file is written (a chunk a
-simulation made 20,000 files for one refined estimation study)."""
+"""Longest a finished simulation waits in memory before its chunk file is written (a file per
+executor chunk, ~0.05 s of work, made 20,000 files for one refined estimation study)."""
 
 
 class _TableCheckpoint:

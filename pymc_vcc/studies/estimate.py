@@ -5,11 +5,11 @@ from the first (system-to-system variability or slow drift). Each drives the mod
 2120 s input profile; the first 1060 s are the calibration data. Dataset 1 is calibrated for
 all 26 parameters and the output-noise scales with a uniform prior, dataset 2 with the Gaussian
 mixture fitted to dataset 1's posterior (Algorithm 1), each of its draws first moved by the step
-the parameters may have taken (``drift``, by default the step between the two truths). Posterior predictives cover the whole
-2120 s, without the output noise (their bands show what the parameters leave uncertain, not
-the jagged median of noisy draws), against the measured data (the reference runs, with the
-sensor noise if given), and dataset 2 is also simulated with dataset 1's true parameters (the
-uncalibrated model of Fig. 8).
+the parameters may have taken (``drift``, by default the step between the two truths).
+Posterior predictives cover the whole 2120 s, without the output noise (their bands show what
+the parameters leave uncertain, not the jagged median of noisy draws), against the measured
+data (the reference runs, with the sensor noise if given), and dataset 2 is also simulated with
+dataset 1's true parameters (the uncalibrated model of Fig. 8).
 
 Three samplers (``method``): the paper's two-phase ABC rejection (Table I's budget), PyMC's
 SMC-ABC on the same distance with a Gaussian kernel of width ε, all particles of a stage
