@@ -7,6 +7,7 @@ import xarray as xr
 from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.priors import GMMPrior, UniformPrior
 from pymc_vcc.inference.regression import (
+    MIN_HELD_OUT_R2,
     posterior_box,
     regression_abc,
     regression_adjustment,
@@ -55,6 +56,28 @@ def test_the_adjustment_gives_the_exact_posterior_of_a_linear_gaussian_model():
     assert sd[2] == pytest.approx(0.4 / np.sqrt(12), rel=0.1)
     assert found.held_out_r2[:2].min() > 0.95 and abs(found.held_out_r2[2]) < 0.05
     assert 0.5 * len(found.weights) < found.effective_size < len(found.weights)
+
+
+def test_inert_parameters_keep_the_prior_where_the_data_sit_off_the_simulations():
+    """Ten inert parameters and data whose 30 noise features sit 2 sd off every simulation's:
+    fitted on their noise summaries, the inert ones were shifted by up to 0.6 of their prior
+    sd; unadjusted, they keep the prior, and the two informed ones their exact mean."""
+    rng = np.random.default_rng(0)
+    thetas = rng.uniform(0.0, 1.0, size=(6000, 12))
+    loadings = rng.normal(size=(2, 10))
+    features = np.column_stack(
+        [thetas[:, :2] @ loadings + 0.05 * rng.normal(size=(6000, 10)), rng.normal(size=(6000, 30))]
+    )
+    observed = np.concatenate([np.array([0.5, 0.5]) @ loadings, np.full(30, 2.0)])
+    found = regression_adjustment(thetas, features, observed, 0.0, 1.0, accept=0.05)
+    mean = found.weights @ found.adjusted
+    sd = np.sqrt(found.weights @ (found.adjusted - mean) ** 2)
+    exact_sd = 0.05 * np.sqrt(np.diag(np.linalg.inv(loadings @ loadings.T)))
+    assert mean[:2] == pytest.approx([0.5, 0.5], abs=0.2 * exact_sd.min())
+    assert (sd[:2] < 1.5 * exact_sd).all()  # the noise features blur the summaries a little
+    assert (found.held_out_r2[2:] < MIN_HELD_OUT_R2).all()
+    assert np.abs(mean[2:] - 0.5).max() < 0.05  # Monte Carlo error ~0.02
+    np.testing.assert_allclose(sd[2:] * np.sqrt(12), 1.0, atol=0.1)
 
 
 def test_few_accepted_draws_a_coefficient_keep_the_exact_spread():

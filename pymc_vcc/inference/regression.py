@@ -28,14 +28,19 @@ the posterior's place and spends its simulations on fresh, independent draws the
 6. **Adjustment**: weighted least squares of the parameters on the summaries' offsets from the
    observed ones; each accepted draw becomes the fit at the data plus its residual over
    sqrt(1 − leverage) (the raw residuals of d + 1 coefficients fitted to a few hundred draws
-   are too small by that factor), back through the logistic (inside the bounds).
+   are too small by that factor), back through the logistic (inside the bounds). A parameter
+   whose summary does not predict it (held-out R² below :data:`MIN_HELD_OUT_R2`) keeps its
+   accepted draws: its slopes are noise, and their fit at the data, an extrapolation from the
+   accepted cloud, shifted the inert FO_SPEED by 1.4 sds in logit space, which pressed its
+   physical spread against a bound (0.68 of the prior's). The other summaries stay in the
+   fit of each informed parameter: they also carry what the noise features add to its own.
 7. **Rounds**: the next round draws in the box of this round's posterior. Summaries fitted
    over a box much wider than the posterior are linear where the outputs are not, and the
    first round's posterior can be wide and off (3 sd on the one-parameter sensor problem from
    a KS-SMC posterior); the second round's summaries are fitted where the posterior is.
 
-A parameter the outputs do not inform has no predictive summary and no slope: it keeps the
-spread of the box draws, the prior's. The result is weighted; it is resampled (systematic) to
+A parameter the outputs do not inform has no predictive summary and is not adjusted: it keeps
+the spread of the box draws, the prior's. The result is weighted; it is resampled (systematic) to
 as many equally weighted draws as were accepted.
 """
 
@@ -88,6 +93,10 @@ coefficients the fit passes through them and every adjusted draw lands on one po
 
 MAX_LEVERAGE = 0.9
 """Largest leverage a residual is corrected for (its inflation at most 1/sqrt(0.1) ≈ 3.2)."""
+
+MIN_HELD_OUT_R2 = 0.05
+"""Held-out R² below which a parameter's summary is noise and the parameter is not adjusted
+(inert parameters score about −0.005)."""
 
 ROUNDS = 2
 """Default rounds, each around the posterior of the one before (module docstring, step 7)."""
@@ -170,7 +179,8 @@ class Adjustment:
 
     Attributes:
         thetas: accepted draws before adjustment (n_accepted, d), physical units.
-        adjusted: the same draws after the local-linear adjustment (n_accepted, d).
+        adjusted: the same draws after the local-linear adjustment (n_accepted, d); those of a
+            parameter with held-out R² below :data:`MIN_HELD_OUT_R2` as accepted.
         weights: Epanechnikov weights of the accepted draws (n_accepted,), summing to 1.
         penalties: per parameter, the ridge penalty of its summary.
         held_out_r2: per parameter, R² of its summary on the draws the fit did not see.
@@ -238,9 +248,14 @@ def regression_adjustment(
     weights /= weights.sum()
     design = np.column_stack([np.ones(n_accept), offsets[nearest]])
     root = np.sqrt(weights)[:, np.newaxis]
-    coefficients, *_ = np.linalg.lstsq(design * root, z[nearest] * root, rcond=None)
-    residuals = z[nearest] - design @ coefficients
-    adjusted = coefficients[0] + residuals / np.sqrt(1 - _leverages(design * root))[:, np.newaxis]
+    informed = held_out_r2 >= MIN_HELD_OUT_R2
+    kept = z[nearest][:, informed]
+    coefficients, *_ = np.linalg.lstsq(design * root, kept * root, rcond=None)
+    residuals = kept - design @ coefficients
+    adjusted = z[nearest]
+    adjusted[:, informed] = (
+        coefficients[0] + residuals / np.sqrt(1 - _leverages(design * root))[:, np.newaxis]
+    )
     return Adjustment(
         thetas=thetas[nearest],
         adjusted=_from_logit(adjusted, lower, upper),
