@@ -68,6 +68,7 @@ def test_inert_parameters_keep_the_prior_where_the_data_sit_off_the_simulations(
     features = np.column_stack(
         [thetas[:, :2] @ loadings + 0.05 * rng.normal(size=(6000, 10)), rng.normal(size=(6000, 30))]
     )
+    features[-5:] *= 100  # wild simulations among the held-out draws: R² stays meaningful
     observed = np.concatenate([np.array([0.5, 0.5]) @ loadings, np.full(30, 2.0)])
     found = regression_adjustment(thetas, features, observed, 0.0, 1.0, accept=0.05)
     mean = found.weights @ found.adjusted
@@ -75,7 +76,7 @@ def test_inert_parameters_keep_the_prior_where_the_data_sit_off_the_simulations(
     exact_sd = 0.05 * np.sqrt(np.diag(np.linalg.inv(loadings @ loadings.T)))
     assert mean[:2] == pytest.approx([0.5, 0.5], abs=0.2 * exact_sd.min())
     assert (sd[:2] < 1.5 * exact_sd).all()  # the noise features blur the summaries a little
-    assert (found.held_out_r2[2:] < MIN_HELD_OUT_R2).all()
+    assert (found.held_out_r2[:2] > 0.9).all() and (found.held_out_r2[2:] < MIN_HELD_OUT_R2).all()
     assert np.abs(mean[2:] - 0.5).max() < 0.05  # Monte Carlo error ~0.02
     np.testing.assert_allclose(sd[2:] * np.sqrt(12), 1.0, atol=0.1)
 
