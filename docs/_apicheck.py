@@ -1,0 +1,114 @@
+"""What the API reference checks of every public name: a docstring, and every parameter named.
+
+Used by ``docs/conf.py`` (a warning per problem, which the strict build turns into an error)
+and by ``tests/test_docs.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import inspect
+import re
+from collections.abc import Iterator
+from typing import Any
+
+SECTIONS = ("Args", "Arguments", "Parameters", "Attributes", "Keyword Args", "Other Parameters")
+_SECTION = re.compile(r"^(\s*)(" + "|".join(SECTIONS) + r"):\s*$")
+_ENTRY = re.compile(r"^\s*(\*{0,2}[A-Za-z_]\w*(?:\s*,\s*\*{0,2}[A-Za-z_]\w*)*)\s*(?:\([^)]*\))?:")
+_NUMPY_ENTRY = re.compile(r"^\s*(\*{0,2}[A-Za-z_]\w*(?:\s*,\s*\*{0,2}[A-Za-z_]\w*)*)\s*(?::.*)?$")
+
+
+def documented_names(doc: str) -> set[str]:
+    """The names a docstring describes: Google-style ``Args:`` / ``Attributes:`` entries and
+    numpy-style ``Parameters`` / ``Attributes`` entries."""
+    names: set[str] = set()
+    lines = doc.splitlines()
+    for k, line in enumerate(lines):
+        google = _SECTION.match(line)
+        numpy = (
+            line.strip() in SECTIONS
+            and k + 1 < len(lines)
+            and set(lines[k + 1].strip()) == {"-"}
+        )
+        if google:
+            names |= _entries(lines[k + 1 :], len(google.group(1)), _ENTRY)
+        elif numpy:
+            names |= _entries(lines[k + 2 :], len(line) - len(line.lstrip()) - 1, _NUMPY_ENTRY)
+    return names
+
+
+def _entries(lines: list[str], section_indent: int, pattern: re.Pattern[str]) -> set[str]:
+    """Entry names of one section: its lines at the first indent deeper than the heading's
+    (numpy: at the heading's), up to the first line at or above the heading's."""
+    names: set[str] = set()
+    indent = None
+    for line in lines:
+        if not line.strip():
+            continue
+        depth = len(line) - len(line.lstrip())
+        if depth <= section_indent or (pattern is _NUMPY_ENTRY and _is_heading(line)):
+            break
+        indent = depth if indent is None else indent
+        entry = pattern.match(line)
+        if depth == indent and entry:
+            names.update(n.strip().lstrip("*") for n in entry.group(1).split(","))
+    return names
+
+
+def _is_heading(line: str) -> bool:
+    return line.strip() in {*SECTIONS, "Returns", "Raises", "Yields", "Notes", "Examples"}
+
+
+def _parameters(obj: Any) -> list[str]:
+    """The parameters a caller passes: a function's, or a class's constructor's."""
+    target = obj
+    if inspect.isclass(obj):
+        if issubclass(obj, enum.Enum | BaseException):
+            return []
+        if getattr(obj, "_is_protocol", False):
+            target = obj.__call__
+        elif "__init__" not in vars(obj) and not dataclasses.is_dataclass(obj):
+            inherited = [klass for klass in obj.__mro__[1:] if "__init__" in vars(klass)]
+            if not inherited or inherited[0].__module__.split(".")[0] != "pymc_vcc":
+                return []
+            target = inherited[0].__init__
+    try:
+        signature = inspect.signature(target)
+    except (TypeError, ValueError):
+        return []
+    return [
+        name
+        for name, parameter in signature.parameters.items()
+        if name not in ("self", "cls")
+        and parameter.kind not in (parameter.VAR_POSITIONAL, parameter.VAR_KEYWORD)
+    ]
+
+
+def attribute_doc(module: str, name: str) -> str:
+    """The docstring of module attribute ``name`` (the string right under its assignment, or
+    ``#:`` comments above it), as Sphinx reads it from the source."""
+    from sphinx.pycode import ModuleAnalyzer
+
+    return "\n".join(ModuleAnalyzer.for_module(module).find_attr_docs().get(("", name), []))
+
+
+def problems(name: str, obj: Any, module: str) -> Iterator[str]:
+    """What the public name ``name`` (defined in ``module``) lacks: its docstring, or the
+    description of a parameter."""
+    if not (inspect.isclass(obj) or inspect.isfunction(obj)):
+        if not attribute_doc(module, name).strip():
+            yield f"{name}: no docstring (a string right under its assignment in {module})"
+        return
+    doc = inspect.getdoc(obj) or ""
+    own = obj.__doc__ if inspect.isclass(obj) else doc
+    if not (own or "").strip():
+        yield f"{name}: no docstring"
+        return
+    described = documented_names(doc)
+    init = vars(obj).get("__init__") if inspect.isclass(obj) else None
+    if init is not None and init.__doc__:
+        described |= documented_names(inspect.getdoc(init) or "")
+    missing = [p for p in _parameters(obj) if p not in described]
+    if missing:
+        yield f"{name}: parameter(s) {missing} not described (an 'Args:' section)"
