@@ -10,9 +10,11 @@ import dataclasses
 import enum
 import inspect
 import re
+import sys
 from collections.abc import Iterator
 from typing import Any
 
+_MISSING = object()
 SECTIONS = ("Args", "Arguments", "Parameters", "Attributes", "Keyword Args", "Other Parameters")
 _SECTION = re.compile(r"^(\s*)(" + "|".join(SECTIONS) + r"):\s*$")
 _ENTRY = re.compile(r"^\s*(\*{0,2}[A-Za-z_]\w*(?:\s*,\s*\*{0,2}[A-Za-z_]\w*)*)\s*(?:\([^)]*\))?:")
@@ -85,20 +87,33 @@ def _parameters(obj: Any) -> list[str]:
     ]
 
 
-def attribute_doc(module: str, name: str) -> str:
-    """The docstring of module attribute ``name`` (the string right under its assignment, or
-    ``#:`` comments above it), as Sphinx reads it from the source."""
+def defining_modules(obj: Any, name: str) -> list[str]:
+    """The loaded ``pymc_vcc`` modules that bind ``name`` to ``obj`` (a re-exported constant
+    is bound in the module that defines it and in those that import it)."""
+    return sorted(
+        module_name
+        for module_name, module in list(sys.modules.items())
+        if module_name.split(".")[0] == "pymc_vcc" and vars(module).get(name, _MISSING) is obj
+    )
+
+
+def attribute_doc(obj: Any, name: str) -> str:
+    """The docstring of the module constant ``name`` (the string right under its assignment),
+    as Sphinx reads it from the source of the module that assigns it."""
     from sphinx.pycode import ModuleAnalyzer
 
-    return "\n".join(ModuleAnalyzer.for_module(module).find_attr_docs().get(("", name), []))
+    for module in defining_modules(obj, name):
+        docs = ModuleAnalyzer.for_module(module).find_attr_docs().get(("", name))
+        if docs:
+            return "\n".join(docs)
+    return ""
 
 
-def problems(name: str, obj: Any, module: str) -> Iterator[str]:
-    """What the public name ``name`` (defined in ``module``) lacks: its docstring, or the
-    description of a parameter."""
+def problems(name: str, obj: Any) -> Iterator[str]:
+    """What the public name ``name`` lacks: its docstring, or the description of a parameter."""
     if not (inspect.isclass(obj) or inspect.isfunction(obj)):
-        if not attribute_doc(module, name).strip():
-            yield f"{name}: no docstring (a string right under its assignment in {module})"
+        if not attribute_doc(obj, name).strip():
+            yield f"{name}: no docstring (a string right under its assignment)"
         return
     doc = inspect.getdoc(obj) or ""
     own = obj.__doc__ if inspect.isclass(obj) else doc
@@ -111,4 +126,4 @@ def problems(name: str, obj: Any, module: str) -> Iterator[str]:
         described |= documented_names(inspect.getdoc(init) or "")
     missing = [p for p in _parameters(obj) if p not in described]
     if missing:
-        yield f"{name}: parameter(s) {missing} not described (an 'Args:' section)"
+        yield f"{name}: parameter(s) {missing} not described (a 'Parameters' or 'Args:' section)"

@@ -9,9 +9,11 @@ the outputs stored in ``docs/notebooks/`` (``scripts/render_notebooks.py``), nev
 
 from __future__ import annotations
 
+import importlib
 import sys
 from pathlib import Path
 
+from sphinx.ext.napoleon.docstring import GoogleDocstring
 from sphinx.util import logging
 
 HERE = Path(__file__).resolve().parent
@@ -82,28 +84,101 @@ html_static_path: list[str] = []
 html_show_sourcelink = False
 html_copy_source = False
 
+
+def _attribute_docstring_as_written(self) -> list[str]:
+    """An attribute's or constant's docstring as it is written: napoleon would read a first
+    line with a colon ("Inputs a controller sets in steps: resampled ...") as ``type: text``."""
+    return self.__class__(self._dedent(self._consume_to_end()), self._config).lines()
+
+
+GoogleDocstring._parse_attribute_docstring = _attribute_docstring_as_written
+
 _documented: set[str] = set()
+_NOTHING = object()
 
 
 def _record(app, what, name, obj, options, lines) -> None:  # noqa: ARG001
     _documented.add(name)
 
 
+def _resolve(dotted: str) -> object:
+    """The object a dotted ``pymc_vcc`` path names, or ``_NOTHING``."""
+    module, _, attribute = dotted.rpartition(".")
+    while module:
+        try:
+            value: object = importlib.import_module(dotted)
+        except ImportError:
+            pass
+        else:
+            return value
+        try:
+            value = importlib.import_module(module)
+        except ImportError:
+            module, _, parent = module.rpartition(".")
+            attribute = f"{parent}.{attribute}"
+            continue
+        for part in attribute.split("."):
+            value = getattr(value, part, _NOTHING)
+            if value is _NOTHING:
+                return _NOTHING
+        return value
+    return _NOTHING
+
+
+def _missing_reference(app, env, node, contnode):
+    """A reference Sphinx did not resolve by its own rules, resolved as Python would.
+
+    In a docstring of ``pymc_vcc.inference.pymc.model``, ``:class:`UniformPrior``` names the
+    class that module imports: it links to that class's entry. A reference to an object that
+    exists but has no entry of its own (a private helper, a module constant) is shown as code.
+    A reference to nothing (a typo, a renamed object) is left to fail the build.
+    """
+    if node.get("refdomain") != "py":
+        return None
+    target = node["reftarget"].lstrip(".~")
+    module, klass = node.get("py:module"), node.get("py:class")
+    candidates = [target]
+    if module:
+        candidates[:0] = [f"{module}.{klass}.{target}"] if klass else []
+        candidates.insert(len(candidates) - 1, f"{module}.{target}")
+    domain = env.get_domain("py")
+    for dotted in candidates:
+        if not dotted.startswith("pymc_vcc"):
+            continue
+        obj = _resolve(dotted)
+        if obj is _NOTHING:
+            continue
+        canonical = (
+            f"{obj.__module__}.{obj.__qualname__}"
+            if hasattr(obj, "__qualname__") and hasattr(obj, "__module__")
+            else getattr(obj, "__name__", None)
+        )
+        for name in (canonical, dotted):
+            if name and name in domain.objects:
+                return domain.resolve_xref(
+                    env, node["refdoc"], app.builder, "obj", name, node, contnode
+                )
+        return contnode
+    return None
+
+
 def _check_public_api(app, env) -> None:  # noqa: ARG001
     """Warn for every public name without an API entry, a docstring or a parameter description."""
     log = logging.getLogger("pymc_vcc.apicheck")
+    entries = {dotted.rpartition(".")[2]: dotted for dotted in _documented}
     for name in pymc_vcc.__all__:
         if name == "__version__":
             continue
-        module = pymc_vcc._MODULE_OF[name]
-        full = f"{module}.{name}"
-        if full not in _documented:
-            log.warning("public name %s has no entry in the API reference (%s)", name, full)
-        for problem in _apicheck.problems(name, getattr(pymc_vcc, name), module):
+        obj = getattr(pymc_vcc, name)
+        dotted = entries.get(name)
+        if dotted is None or _resolve(dotted) is not obj:
+            log.warning("public name %s has no entry in the API reference", name)
+        for problem in _apicheck.problems(name, obj):
             log.warning("public API: %s", problem)
 
 
 def setup(app):
     app.connect("autodoc-process-docstring", _record)
     app.connect("env-check-consistency", _check_public_api)
+    app.connect("missing-reference", _missing_reference)
     return {"parallel_read_safe": False}

@@ -110,7 +110,7 @@ def simulate(
     xarray.Dataset
         Variables ``TD, PD, TS, PS, TC, PC, TE, PE, MDOT`` over ``time`` with ``units`` attrs;
         attrs ``status`` ("ok" | "failed"), ``failure_reason``, ``solver``, ``n_rhs``,
-        ``n_jac``, ``n_steps``, ``wall_time`` (s), ``mass_error`` (max |M - M0|/M0
+        ``n_jac``, ``n_steps``, ``wall_time`` (s), ``mass_error`` (max ``|M - M0| / M0``
         on the grid), ``source_integral`` (∫|ṁ_src| dt, kg).
     """
     unit = _builtin_unit() if unit is None else unit

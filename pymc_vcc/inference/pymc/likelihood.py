@@ -73,7 +73,7 @@ def add_likelihood(
         observed: measured outputs; a Dataset whose variables carry ``units`` (K, Pa, kg/s, W)
             so that each output gets its kind's noise (or name kinds in ``sensor_noise``).
         sensor_noise: the sensors' noise (known scales; correlation and Student-t allowed).
-        prior: a :class:`UniformPrior`, a :class:`GMMPrior` or bounds name -> (low, high)
+        prior: a :class:`UniformPrior`, a :class:`.GMMPrior` or bounds name -> (low, high)
             (default: uniform on the simulator's bounds).
         parameters: parameters to calibrate (default: those of ``prior``).
         outputs: outputs in the likelihood (default: all of ``observed``).
