@@ -29,9 +29,7 @@ def documented_names(doc: str) -> set[str]:
     for k, line in enumerate(lines):
         google = _SECTION.match(line)
         numpy = (
-            line.strip() in SECTIONS
-            and k + 1 < len(lines)
-            and set(lines[k + 1].strip()) == {"-"}
+            line.strip() in SECTIONS and k + 1 < len(lines) and set(lines[k + 1].strip()) == {"-"}
         )
         if google:
             names |= _entries(lines[k + 1 :], len(google.group(1)), _ENTRY)
@@ -121,9 +119,11 @@ def problems(name: str, obj: Any) -> Iterator[str]:
         yield f"{name}: no docstring"
         return
     described = documented_names(doc)
-    init = vars(obj).get("__init__") if inspect.isclass(obj) else None
-    if init is not None and init.__doc__:
-        described |= documented_names(inspect.getdoc(init) or "")
+    if inspect.isclass(obj):
+        # the constructor's own docstring, or that of the class whose constructor it inherits
+        owner = next((k for k in obj.__mro__ if "__init__" in vars(k)), obj)
+        for source in (owner.__doc__, vars(owner).get("__init__", None).__doc__):
+            described |= documented_names(inspect.cleandoc(source or ""))
     missing = [p for p in _parameters(obj) if p not in described]
     if missing:
         yield f"{name}: parameter(s) {missing} not described (a 'Parameters' or 'Args:' section)"

@@ -26,7 +26,7 @@ import pymc_vcc  # noqa: E402
 
 project = "pymc_vcc"
 author = "the pymc_vcc developers"
-copyright = "the pymc_vcc developers"  # noqa: A001
+copyright = "the pymc_vcc developers"
 release = version = pymc_vcc.__version__
 
 extensions = [
@@ -97,7 +97,7 @@ _documented: set[str] = set()
 _NOTHING = object()
 
 
-def _record(app, what, name, obj, options, lines) -> None:  # noqa: ARG001
+def _record(app, what, name, obj, options, lines) -> None:
     _documented.add(name)
 
 
@@ -162,7 +162,7 @@ def _missing_reference(app, env, node, contnode):
     return None
 
 
-def _check_public_api(app, env) -> None:  # noqa: ARG001
+def _check_public_api(app, env) -> None:
     """Warn for every public name without an API entry, a docstring or a parameter description."""
     log = logging.getLogger("pymc_vcc.apicheck")
     entries = {dotted.rpartition(".")[2]: dotted for dotted in _documented}

@@ -1,4 +1,4 @@
-"""Execute the tutorials in ``notebooks/`` and store them, with their outputs, in ``docs/notebooks/``.
+"""Execute the tutorials in ``notebooks/`` and store them, with outputs, in ``docs/notebooks/``.
 
 The notebooks in ``notebooks/`` are committed without outputs (``tests/test_notebooks.py``
 executes them). The documentation shows these executed copies instead of running the
