@@ -177,7 +177,17 @@ def _check_public_api(app, env) -> None:
             log.warning("public API: %s", problem)
 
 
+def _images_inside_the_build(app) -> None:
+    """myst-nb writes notebook images to ``<outdir>/../jupyter_execute``, which for
+    ``site/`` is the repository itself: keep them beside the doctrees instead."""
+    config = getattr(app.env, "mystnb_config", None)
+    if config is not None:
+        folder = Path(app.doctreedir).joinpath("jupyter_execute").resolve()
+        app.env.mystnb_config = config.copy(output_folder=str(folder))
+
+
 def setup(app):
+    app.connect("builder-inited", _images_inside_the_build, priority=900)
     app.connect("autodoc-process-docstring", _record)
     app.connect("env-check-consistency", _check_public_api)
     app.connect("missing-reference", _missing_reference)
