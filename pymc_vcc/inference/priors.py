@@ -575,7 +575,7 @@ def load_prior(path: str | Path) -> Prior:
     Parameters
     ----------
     path
-        The JSON file ``Prior.save`` wrote.
+        The netCDF file ``Prior.save`` wrote.
     """
     with xr.open_dataset(path, engine="h5netcdf") as dataset:
         return prior_from_dataset(dataset.load())
