@@ -799,6 +799,8 @@ def load_log(
     """:func:`load_measurements` with a column map (default: the one beside the log);
     ``options`` as for :func:`load_measurements`."""
     path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"log {path} does not exist")
     if column_map is None:
         beside = column_map_beside(path)
         if not beside.is_file():

@@ -14,9 +14,11 @@ settling), so a record taken from a running unit needs no start-up transient.
 
 from __future__ import annotations
 
+import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pymc as pm
@@ -318,3 +320,178 @@ def charge_summary(tree: xr.DataTree, interval: float = 0.95) -> dict[str, float
         "low_kg": float(low),
         "high_kg": float(high),
     }
+
+
+RECORD_BUDGETS: dict[str, tuple[int, int]] = {
+    "smoke": (24, 12),
+    "small": (128, ERROR_DRAWS),
+    "paper": (512, 256),
+}
+"""Budget name -> (SMC particles, model-error draws) of a record's calibration."""
+
+POSTERIOR_FILE = "posterior.nc"
+PRIOR_FILE = "prior.nc"
+
+
+@dataclass
+class RecordResult:
+    """What a record's calibration found.
+
+    Attributes:
+        tree: the posterior DataTree (with the predictive check in ``sample_stats``).
+        charge: the charge's posterior mean, sd and 95 % interval, kg.
+        checks: per output, the predictive check (``z_mean``, ``p_value``, ``misfit``).
+        n_simulations: every simulation the result rests on.
+        wall_seconds: wall time, s.
+        alarm: P(charge < alarm fraction × commissioning charge), with a commissioning prior.
+        commissioning_kg: the commissioning posterior's mean charge, kg.
+    """
+
+    tree: xr.DataTree
+    charge: dict[str, float]
+    checks: dict[str, dict[str, float]]
+    n_simulations: int
+    wall_seconds: float
+    alarm: float | None = None
+    commissioning_kg: float | None = None
+
+    def summary(self) -> dict:
+        """The JSON summary."""
+        return {
+            "charge": self.charge,
+            "checks": self.checks,
+            "misfit_outputs": [name for name, c in self.checks.items() if c["misfit"]],
+            "alarm": self.alarm,
+            "commissioning_kg": self.commissioning_kg,
+            "n_simulations": self.n_simulations,
+            "wall_seconds": round(self.wall_seconds, 1),
+        }
+
+    def format_table(self) -> str:
+        """The charge and the predictive check, as engineers read them."""
+        c = self.charge
+        lines = [
+            f"charge M0 = {c['mean_kg']:.3f} ± {c['sd_kg']:.3f} kg "
+            f"(95 % interval {c['low_kg']:.3f} to {c['high_kg']:.3f} kg)"
+        ]
+        if self.alarm is not None:
+            lines.append(
+                f"leak alarm: P(M0 below the alarm threshold) = {self.alarm:.2f} "
+                f"(commissioned at {self.commissioning_kg:.3f} kg)"
+            )
+        lines.append("\noutput  z_mean  p_value  model reproduces it")
+        for name, check in self.checks.items():
+            verdict = "NO" if check["misfit"] else "yes"
+            lines.append(f"{name:<7} {check['z_mean']:+6.2f}  {check['p_value']:7.3g}  {verdict}")
+        return "\n".join(lines)
+
+
+def commissioning_prior(
+    posterior: xr.DataTree, unit: Unit, drift: float, seed: int
+) -> tuple[Prior, float]:
+    """The prior of a later record from a commissioning posterior: its nuisance parameters as
+    they were (a Gaussian mixture, each draw moved by ``drift`` × the range), the charge
+    uniform on its bounds (a leak may have moved it anywhere); and the commissioned charge."""
+    from pymc_vcc.inference.priors import GMMPrior
+
+    names = [str(n) for n in posterior["posterior"].data_vars if n in unit.parameters.ids]
+    if CHARGE not in names:
+        raise ValueError(f"the commissioning posterior has no {CHARGE}; it has {names}")
+    samples = np.column_stack([posterior["posterior"][n].values.ravel() for n in names])
+    commissioned = float(samples[:, names.index(CHARGE)].mean())
+    rng = np.random.default_rng(seed)
+    spec = unit.parameters[CHARGE]
+    samples[:, names.index(CHARGE)] = rng.uniform(spec.low, spec.high, len(samples))
+    box = box_prior(unit, names)
+    nuisance_drift = {name: (0.0 if name == CHARGE else drift) for name in names}
+    prior = GMMPrior.fit(
+        dict(zip(names, samples.T, strict=True)), box, seed=seed, drift=nuisance_drift
+    )
+    return prior, commissioned
+
+
+def record_study(
+    settings,
+    log: str,
+    *,
+    column_map: str | None = None,
+    unit: Unit | None = None,
+    commissioning: str | None = None,
+    drift: float = 0.03,
+    alarm_fraction: float = 0.9,
+) -> RecordResult:
+    """Calibrate a unit's log (``pymc-vcc calibrate``), or identify its charge against a
+    commissioning result (``pymc-vcc leak LOG --prior``): load and check the log before any
+    simulation, calibrate, and write the posterior, its mixture prior for later records, the
+    predictive check and a figure into ``settings.out``."""
+    from pymc_vcc.io.measurements import load_log
+    from pymc_vcc.plots import plot_charge_posteriors, save_figure
+    from pymc_vcc.studies.common import write_json, write_netcdf, write_text
+
+    started = time.perf_counter()
+    if not 0.0 < alarm_fraction < 1.0:
+        raise ValueError(f"alarm fraction must lie in (0, 1), got {alarm_fraction}")
+    if not 0.0 <= drift <= 1.0:
+        raise ValueError(f"drift must lie in [0, 1] (a fraction of each range), got {drift}")
+    budget = settings.budget if isinstance(settings.budget, str) else "small"
+    if budget not in RECORD_BUDGETS:
+        raise ValueError(f"budget {budget!r}: a record's calibration takes {list(RECORD_BUDGETS)}")
+    unit = settings.unit(unit)
+    measured = load_log(log, column_map, dt=unit.solver.output_interval)
+    prior, commissioned = None, None
+    if commissioning is not None:
+        path = Path(commissioning)
+        path = path / POSTERIOR_FILE if path.is_dir() else path
+        if not path.is_file():
+            raise FileNotFoundError(f"no commissioning posterior at {path}")
+        prior, commissioned = commissioning_prior(
+            xr.open_datatree(path, engine="h5netcdf"), unit, drift, settings.seed
+        )
+    draws, error_draws = RECORD_BUDGETS[budget]
+    with settings.claim_output("calibrate" if commissioning is None else "leak"):
+        with settings.open_executor() as executor:
+            tree = calibrate_record(
+                measured.observed,
+                measured.inputs,
+                executor,
+                unit=unit,
+                prior=prior,
+                draws=draws,
+                error_draws=error_draws,
+                seed=settings.seed,
+                solver=settings.solver or "cvode",
+            )
+        stats = tree["sample_stats"]
+        checks = {
+            str(name): {
+                key: float(stats[f"ppc_{key}"].sel(output=name))
+                for key in ("z_mean", "p_value", "misfit")
+            }
+            for name in stats["output"].values
+        }
+        alarm = None
+        if commissioned is not None:
+            draws_kg = tree["posterior"][CHARGE].values.ravel()
+            alarm = float(np.mean(draws_kg < alarm_fraction * commissioned))
+        result = RecordResult(
+            tree=tree,
+            charge=charge_summary(tree),
+            checks=checks,
+            n_simulations=int(stats["n_simulations"]),
+            wall_seconds=time.perf_counter() - started,
+            alarm=alarm,
+            commissioning_kg=commissioned,
+        )
+        if settings.out is not None:
+            from pymc_vcc.inference.priors import GMMPrior
+
+            out = settings.out
+            write_netcdf(tree, out / POSTERIOR_FILE)
+            names = [n for n in tree["posterior"].data_vars if n in unit.parameters.ids]
+            samples = {n: tree["posterior"][n].values.ravel() for n in names}
+            GMMPrior.fit(samples, box_prior(unit, names), seed=settings.seed).save(out / PRIOR_FILE)
+            write_json(out / "summary.json", result.summary())
+            write_text(out / "report.txt", result.format_table() + "\n")
+            figure = plot_charge_posteriors([tree], [commissioned or result.charge["mean_kg"]])
+            save_figure(figure, out / "charge")
+    return result
