@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint format bench clean
+.PHONY: demo test docs lint format bench clean
 
 $(BIN)/python:
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 12), \
@@ -25,6 +25,10 @@ test: $(STAMP)
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -n 2 --durations=15
 
+docs: $(STAMP)
+	$(BIN)/sphinx-build -W --keep-going -n -q -b html docs site
+	@echo "docs: site/index.html"
+
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
@@ -37,5 +41,5 @@ bench: $(STAMP)
 	$(BIN)/pymc-vcc bench
 
 clean:
-	rm -rf $(VENV) results build *.egg-info
+	rm -rf $(VENV) results build site *.egg-info
 	find pymc_vcc -name "*.nbi" -o -name "*.nbc" | xargs rm -f

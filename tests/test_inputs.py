@@ -66,9 +66,12 @@ def test_csv_round_trip_converts_celsius(tmp_path):
         (HEADER + "0,0.4,55,35,27\n100,0.4,55,nan,27\n", "T_ambient is NaN at time 100"),
         (HEADER + "0,0.4,55,35,27\n100,0.4,55,35,27\n50,0.4,55,35,27\n", "strictly increasing"),
         (HEADER + "5,0.4,55,35,27\n100,0.4,55,35,27\n", "start at 0"),
-        (HEADER.replace("[Hz]", "[rpm]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "'rpm'"),
+        (HEADER.replace("[Hz]", "[kg]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "'kg'"),
+        (HEADER.replace("[Hz]", "[rpm]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "outside the"),
         (HEADER.replace("valve_opening", "lev") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "'lev'"),
-        (HEADER.replace("time [s]", "t [s]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "first col"),
+        (HEADER.replace("time [s]", "t [s]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "no 'time'"),
+        (HEADER.replace("time [s]", "time [weeks]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "weeks"),
+        (HEADER + "0,0.4,55,35,27\n9,0.4,fast,35,27\n", "line 3: 'fast' is not a number"),
         (HEADER + "0,0.4,55,35,27\n9,1.4,55,35,27\n", r"outside the allowed range"),
         (HEADER + "0,0.4,55,35\n9,0.4,55,35,27\n", "every row"),
         ("time [s],valve_opening [1]\n0,0.4\n9,0.4\n", "missing"),
@@ -101,3 +104,63 @@ def test_optional_indoor_humidity():
         constant_inputs(100.0, **rated, T_indoor=300.15, RH_indoor=1.2)
     with pytest.raises(ValueError, match="unknown input"):
         constant_inputs(100.0, **rated, T_indoor=300.15, RH_outdoor=0.5)
+
+
+def _write(tmp_path, text):
+    path = tmp_path / "profile.csv"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_csv_with_bare_si_names_reads_as_si(tmp_path):
+    path = _write(
+        tmp_path,
+        "time,valve_opening,compressor_speed,T_ambient,T_indoor,RH_indoor\n"
+        "0,0.4,55,308.15,300.15,0.5\n60,0.45,60,308.15,300.15,0.5\n",
+    )
+    inputs = load_inputs_csv(path)
+    np.testing.assert_allclose(inputs.compressor_speed.values, [55.0, 60.0])
+    np.testing.assert_allclose(inputs.T_ambient.values, 308.15)
+    np.testing.assert_allclose(inputs.RH_indoor.values, 0.5)
+
+
+def test_csv_with_a_units_row_semicolons_and_decimal_commas(tmp_path):
+    path = _write(
+        tmp_path,
+        "time;valve_opening;compressor_speed;T_ambient;T_indoor\n"
+        "min;%;rpm;°C;degF\n"
+        "0;40;3300;35,0;80,6\n2;45;3900;35,5;80,6\n4;45;3900;35,5;80,6\n",
+    )
+    inputs = load_inputs_csv(path)
+    np.testing.assert_allclose(inputs.time.values, [0.0, 120.0, 240.0])
+    np.testing.assert_allclose(inputs.valve_opening.values, [0.4, 0.45, 0.45])
+    np.testing.assert_allclose(inputs.compressor_speed.values, [55.0, 65.0, 65.0])
+    np.testing.assert_allclose(inputs.T_ambient.values, [308.15, 308.65, 308.65])
+    np.testing.assert_allclose(inputs.T_indoor.values, 300.15)
+
+
+def test_csv_read_like_a_logger_file_with_columns_and_units(tmp_path):
+    path = _write(
+        tmp_path,
+        "Status,Seconds,EEV_pct,Comp (Hz),T_out_C,T_in_C\n"
+        "RUN,0,40,55,35,27\nRUN,100,50,60,30,25\nRUN,200,50,60,30,25\n",
+    )
+    columns = {
+        "EEV_pct": "valve_opening",
+        "Comp": "compressor_speed",
+        "T_out_C": "T_ambient",
+        "T_in_C": "T_indoor",
+    }
+    units = {"EEV_pct": "%", "T_out_C": "C", "T_in_C": "C"}
+    inputs = load_inputs_csv(path, units, columns=columns, time_column="Seconds")
+    np.testing.assert_allclose(inputs.valve_opening.values, [0.4, 0.5, 0.5])
+    np.testing.assert_allclose(inputs.T_indoor.values, [300.15, 298.15, 298.15])
+    with pytest.raises(ValueError, match="unknown input"):
+        load_inputs_csv(path, units, columns={**columns, "Status": "mode"}, time_column="Seconds")
+
+
+def test_the_shipped_profiles_read_as_before():
+    inputs = builtin_inputs()
+    assert float(inputs.T_ambient[0]) == pytest.approx(308.15)
+    assert float(inputs.valve_opening[0]) == pytest.approx(0.40)
+    assert float(inputs.compressor_speed[0]) == pytest.approx(55.0)

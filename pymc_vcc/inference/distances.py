@@ -69,7 +69,17 @@ def ks_statistics(sims: np.ndarray, obs: np.ndarray) -> np.ndarray:
 def ks_distances(sims: np.ndarray, obs: np.ndarray) -> np.ndarray:
     """The paper's distance for many simulations at once: KS statistics averaged over outputs.
 
-    ``sims`` (N, n_outputs, m), ``obs`` (n_outputs, n) → (N,), each in [0, 1].
+    Parameters
+    ----------
+    sims
+        Simulated outputs, shape (N, n_outputs, m), in the outputs' SI units.
+    obs
+        Observed outputs, shape (n_outputs, n), same units and output order.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (N,), each distance in [0, 1] (dimensionless).
     """
     return ks_statistics(sims, obs).mean(axis=1)
 
@@ -124,8 +134,19 @@ def wasserstein_distances(sims: np.ndarray, obs: np.ndarray) -> np.ndarray:
     """1-D Wasserstein-1 distance of each output's values, over the observed spread, averaged.
 
     Like KS it compares value distributions (no time alignment), but it keeps decreasing as the
-    simulated values approach the observed ones instead of saturating at 1. ``sims``
-    (N, n_outputs, m), ``obs`` (n_outputs, n) → (N,), dimensionless.
+    simulated values approach the observed ones instead of saturating at 1.
+
+    Parameters
+    ----------
+    sims
+        Simulated outputs, shape (N, n_outputs, m), in the outputs' SI units.
+    obs
+        Observed outputs, shape (n_outputs, n), same units and output order.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (N,), dimensionless (each output's distance over its observed spread).
     """
     sims = np.asarray(sims, dtype=float)
     obs = np.asarray(obs, dtype=float)
@@ -154,7 +175,21 @@ def windowed_distances(sims: np.ndarray, obs: np.ndarray, window: int = 10) -> n
 
     Time-aligned (it needs the simulations on the observed grid): averaging over windows
     divides the sensor noise by √window while keeping the slow dynamics that carry the
-    parameters. ``sims`` (N, n_outputs, n), ``obs`` (n_outputs, n) → (N,), dimensionless.
+    parameters.
+
+    Parameters
+    ----------
+    sims
+        Simulated outputs on the observed time grid, shape (N, n_outputs, n), SI units.
+    obs
+        Observed outputs, shape (n_outputs, n), same units and output order.
+    window
+        Samples per window (10: 10 s windows on the 1 s grid).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (N,), dimensionless (RMS gap over each output's observed spread).
     """
     sims = np.asarray(sims, dtype=float)
     obs = np.asarray(obs, dtype=float)

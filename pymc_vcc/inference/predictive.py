@@ -152,7 +152,7 @@ def simulate_predictive(
         outputs: outputs to predict (default: every output of the simulator or reference).
         reference: outputs observed (or true) on the same profile, stored as ``observed_data``
             (in place of the calibration data) for comparison.
-        noise: add the output noise (the predictive of data): the paper's Y + ν·|Y|·Z for
+        noise: add the output noise (the predictive of data): the paper's ``Y + ν·|Y|·Z`` for
             outputs whose ``nu_<output>`` is in the posterior, and ``sensor_noise`` if given;
             False: predict the noise-free outputs (smooth bands).
         sensor_noise: sensor noise in engineering units added to every draw (with

@@ -570,6 +570,12 @@ def prior_from_dataset(dataset: xr.Dataset) -> Prior:
 
 
 def load_prior(path: str | Path) -> Prior:
-    """Read a prior written by ``Prior.save``."""
+    """Read a prior written by ``Prior.save``.
+
+    Parameters
+    ----------
+    path
+        The JSON file ``Prior.save`` wrote.
+    """
     with xr.open_dataset(path, engine="h5netcdf") as dataset:
         return prior_from_dataset(dataset.load())

@@ -145,10 +145,15 @@ def sequential_calibration(
         checkpoint: folder for one checkpoint per dataset (``dataset_k.sqlite``); a restarted
             run resumes where it stopped.
         seed: the stages use its children ``SeedSequence.spawn`` style, one per dataset.
+        n_pilot, quantile, n_main, n_desired: the rejection sampler's budget per dataset (the
+            paper's Table I: 5000 pilot draws, the 5 % quantile, 80000 main draws, 4000
+            accepted).
+        noise, sensor_noise, outputs, distance: how simulations are compared with the data.
+        executor, n_workers, time_limit, max_failure_rate, progress: where and how the
+            simulations run (``time_limit`` in s per simulation).
 
-    The other arguments are those of :func:`~pymc_vcc.inference.rejection.abc_rejection`, applied
-    to each
-    dataset (defaults: the paper's Table I).
+    The arguments after ``drift`` are those of
+    :func:`~pymc_vcc.inference.rejection.abc_rejection`, applied to each dataset.
     """
     if len(datasets) == 0:
         raise ValueError("datasets is empty; give at least one observed dataset")

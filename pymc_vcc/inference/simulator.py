@@ -25,7 +25,15 @@ Bounds = dict[str, tuple[float, float]]
 class Simulator(Protocol):
     """``simulator(theta, rng) -> outputs``; picklable (a module-level function, a
     ``functools.partial`` of one, or an instance of a module-level class) to run in other
-    processes."""
+    processes.
+
+    Parameters
+    ----------
+    theta
+        Parameter values by name, in the parameters' units (SI).
+    rng
+        A generator for a stochastic simulator (the cycle is deterministic and ignores it).
+    """
 
     def __call__(
         self, theta: Mapping[str, float], rng: np.random.Generator | None, /
@@ -76,6 +84,11 @@ def check_simulator(simulator: Any) -> SimulatorInfo:
 
     Raises ``TypeError`` naming what is wrong: not callable, or names that are not sequences
     of strings.
+
+    Parameters
+    ----------
+    simulator
+        The callable to check (a :class:`Simulator`).
     """
     if not isinstance(simulator, Simulator):
         raise TypeError(

@@ -3,12 +3,16 @@
 An input profile is an ``xarray.Dataset`` over ``time`` (s, starting at 0, strictly increasing)
 with the four variables of :data:`INPUTS`, SI units in their ``units`` attrs. Values are held
 constant from one time to the next (zero-order hold, as the step profiles of the paper's Fig. 4);
-the last time is the end of the profile. CSV files carry a ``time [s]`` column and one
-``name [unit]`` column per input; temperatures may be given in ``degC``.
+the last time is the end of the profile. CSV files (:func:`load_inputs_csv`) carry a time
+column and one column per input, in any unit of the right kind (``degC``, ``%``, ``rpm``, ...),
+given in the header (``T_ambient [degC]``), in a row of units under it, or SI for a bare name.
 """
 
 from __future__ import annotations
 
+import csv
+import re
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -45,6 +49,8 @@ INPUTS: tuple[InputSpec, ...] = (
 """The four inputs in the order the cycle reads them."""
 
 INPUT_IDS: tuple[str, ...] = tuple(spec.id for spec in INPUTS)
+"""Ids of the four required inputs, in order: ``valve_opening`` (fraction), ``compressor_speed``
+(Hz), ``T_ambient`` and ``T_indoor`` (K)."""
 
 OPTIONAL_INPUTS: tuple[tuple[InputSpec, float], ...] = (
     (InputSpec("RH_indoor", "Indoor relative humidity", "1", 0.0, 1.0), 0.0),
@@ -62,7 +68,17 @@ _CELSIUS_OFFSET = 273.15
 
 
 def make_inputs(time: ArrayLike, **values: ArrayLike) -> xr.Dataset:
-    """Build and validate an input Dataset from arrays in SI units (one value per time)."""
+    """Build and validate an input Dataset from arrays in SI units (one value per time).
+
+    Parameters
+    ----------
+    time
+        Times, s: starting at 0, strictly increasing; the last one is the end of the profile.
+    **values
+        One array (or scalar) per input id, SI: ``valve_opening`` (fraction),
+        ``compressor_speed`` (Hz), ``T_ambient`` and ``T_indoor`` (K), optionally
+        ``RH_indoor`` (fraction). Each value is held until the next time.
+    """
     time = np.asarray(time, dtype=float)
     data_vars = {}
     for spec in _ALL_INPUTS:
@@ -130,62 +146,256 @@ def validate_inputs(inputs: xr.Dataset) -> None:
             )
 
 
-def _parse_header(column: str) -> tuple[str, str]:
+_QUANTITY = {
+    "valve_opening": "fraction",
+    "compressor_speed": "speed",
+    "T_ambient": "temperature",
+    "T_indoor": "temperature",
+    "RH_indoor": "fraction",
+}
+"""The physical quantity of each input, as :func:`pymc_vcc.io.measurements.unit_converter`
+names it."""
+
+_CELSIUS = ("degC", "°C", "C", "℃", "celsius")
+_SECONDS_PER = {"s": 1.0, "sec": 1.0, "second": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
+_MISSING = ("", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "none", "None", "-")
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
+
+
+def _split_header_unit(column: str) -> tuple[str, str | None]:
+    """``"T_ambient [degC]"`` or ``"T_ambient (degC)"`` -> (name, unit); a bare name -> (name,
+    None)."""
     column = column.strip()
-    if not (column.endswith("]") and "[" in column):
-        raise ValueError(f"CSV column {column!r}: expected a header of the form 'name [unit]'")
-    name, unit = column[:-1].split("[", 1)
-    return name.strip(), unit.strip()
+    for opening, closing in (("[", "]"), ("(", ")")):
+        if column.endswith(closing) and opening in column:
+            name, unit = column[:-1].rsplit(opening, 1)
+            if name.strip() and unit.strip():
+                return name.strip(), unit.strip()
+    return column, None
 
 
-def load_inputs_csv(path: str | Path) -> xr.Dataset:
-    """Load an input profile from CSV (``time [s]`` plus one ``name [unit]`` column per input)."""
+def _converter(unit: str, input_id: str, source: str) -> Callable[[np.ndarray], np.ndarray]:
+    """Values in ``unit`` to the SI unit of ``input_id``: SI and °C directly, anything else
+    (``%``, ``rpm``, ``degF``, ...) with pint, as the measured-log reader converts."""
+    spec = next(spec for spec in _ALL_INPUTS if spec.id == input_id)
+    if unit == spec.unit:
+        return lambda values: values
+    if spec.unit == "K" and unit in _CELSIUS:
+        return lambda values: values + _CELSIUS_OFFSET
+    if spec.unit == "1" and unit == "%":
+        return lambda values: values / 100.0
+    from pymc_vcc.io.measurements import unit_converter  # pint, only for other units
+
+    try:
+        return unit_converter(unit, _QUANTITY[input_id])
+    except ValueError as error:
+        raise ValueError(f"{source}: column {input_id}: {error}") from None
+
+
+def load_inputs_csv(
+    path: str | Path,
+    units: Mapping[str, str] | None = None,
+    *,
+    columns: Mapping[str, str] | None = None,
+    time_column: str = "time",
+    time_unit: str = "s",
+    decimal: str | None = None,
+) -> xr.Dataset:
+    """Load an input profile from a CSV file, converting its units to SI.
+
+    The file reads as a measured log does (:func:`pymc_vcc.io.measurements.load_measurements`):
+    separated by ``,``, ``;`` or tabs, a header row, optionally a row of units under it. Each
+    column is named by an input id (``valve_opening``, ``compressor_speed``, ``T_ambient``,
+    ``T_indoor``, optionally ``RH_indoor``), or by any name that ``columns`` maps to one. A
+    column's unit comes from ``units``, else from its header (``T_ambient [degC]`` or
+    ``T_ambient (degC)``), else from the units row; a bare name means SI (fraction, Hz, K). Any
+    unit of the right kind converts: ``degC``, ``°C``, ``C``, ``degF``, ``%``, ``rpm``, ...
+    Values are held from one row to the next; the last row is the end time.
+
+    Parameters
+    ----------
+    path
+        The CSV file.
+    units
+        File column -> unit, for columns whose header and units row do not give one.
+    columns
+        File column -> input id; other file columns are then ignored. Without it every
+        column but the time must be named by an input id.
+    time_column
+        The column of the times: numbers from 0, strictly increasing, in ``time_unit`` (or
+        the unit its header or the units row gives: ``s``, ``ms``, ``min``, ``h``).
+    time_unit
+        Unit of the times when the file does not give one.
+    decimal
+        The decimal mark, ``"."`` or ``","`` (default: ``","`` if the file is not
+        comma-separated and its numbers are written ``27,5``).
+
+    Returns
+    -------
+    xarray.Dataset
+        The input profile over ``time`` (s), SI units in ``units`` attrs.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        Naming the file and what is wrong: a missing or unknown column, a unit of the wrong
+        kind, a cell that is not a number, times that do not start at 0 or do not increase, a
+        value outside the input's allowed range.
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"input profile {path} does not exist")
-    return _inputs_from_csv_text(path.read_text(), str(path))
+    return _inputs_from_csv_text(
+        path.read_text(encoding="utf-8-sig"),
+        str(path),
+        units=units,
+        columns=columns,
+        time_column=time_column,
+        time_unit=time_unit,
+        decimal=decimal,
+    )
 
 
-def _inputs_from_csv_text(text: str, source: str) -> xr.Dataset:
+def _is_number(text: str, decimal: str) -> bool:
+    try:
+        float(text.replace(decimal, ".") if decimal != "." else text)
+    except ValueError:
+        return False
+    return True
+
+
+def _inputs_from_csv_text(
+    text: str,
+    source: str,
+    *,
+    units: Mapping[str, str] | None = None,
+    columns: Mapping[str, str] | None = None,
+    time_column: str = "time",
+    time_unit: str = "s",
+    decimal: str | None = None,
+) -> xr.Dataset:
     lines = [line for line in text.splitlines() if line.strip()]
     if len(lines) < 3:
         raise ValueError(f"{source}: expected a header and at least two rows")
-    header = [_parse_header(column) for column in lines[0].split(",")]
-    names = [name for name, _ in header]
-    if names[0] != "time":
-        raise ValueError(f"{source}: the first column must be 'time [s]', got {names[0]!r}")
-    if len(set(names)) != len(names):
-        raise ValueError(f"{source}: duplicate column names in {names}")
-    rows = [line.split(",") for line in lines[1:]]
-    for number, row in enumerate(rows, start=2):
+    try:
+        delimiter = csv.Sniffer().sniff(lines[0], delimiters=",;\t").delimiter
+    except csv.Error:
+        delimiter = ","
+    rows = [[cell.strip() for cell in row] for row in csv.reader(lines, delimiter=delimiter)]
+    header = rows[0]
+    if len(set(header)) != len(header):
+        raise ValueError(f"{source}: duplicate column names in {header}")
+    for number, row in enumerate(rows[1:], start=2):
         if len(row) != len(header):
             raise ValueError(
                 f"{source}: every row needs {len(header)} values; line {number} has {len(row)}"
             )
-    try:
-        table = np.array([[float(cell) for cell in row] for row in rows], dtype=float)
-    except ValueError as error:
-        raise ValueError(f"{source}: non-numeric value ({error})") from None
-    if header[0][1] != "s":
-        raise ValueError(f"{source}: time must be in 's', got {header[0][1]!r}")
-    specs = {spec.id: spec for spec in INPUTS}
+    names = [_split_header_unit(column)[0] for column in header]
+    if decimal not in (None, ".", ","):
+        raise ValueError(f"decimal must be '.' or ',' (or None to infer it), got {decimal!r}")
+    first_line = 2
+    units_row: dict[str, str] = {}
+    if all(
+        cell and cell not in _MISSING and not _is_number(cell, decimal or ".") for cell in rows[1]
+    ):
+        units_row = dict(zip(header, rows[1], strict=True))
+        rows = [header, *rows[2:]]
+        first_line = 3
+        if len(rows) < 3:
+            raise ValueError(f"{source}: expected at least two rows under the units row")
+    if decimal is None:
+        cells = [cell for row in rows[1:] for cell in row]
+        decimal = "," if delimiter != "," and any(_DECIMAL_COMMA.match(c) for c in cells) else "."
+
+    given = dict(units or {})
+    mapping = dict(columns or {})
+    unknown_ids = sorted(set(mapping.values()) - set(CYCLE_INPUT_IDS))
+    if unknown_ids:
+        raise ValueError(
+            f"columns map to unknown input(s) {unknown_ids}; allowed are {CYCLE_INPUT_IDS}"
+        )
+
+    def find(column: str) -> int | None:
+        if column in header:
+            return header.index(column)
+        return names.index(column) if column in names else None
+
+    time_index = find(time_column)
+    if time_index is None:
+        raise ValueError(
+            f"{source}: no {time_column!r} column (the times, s); the file has columns {header}"
+        )
+    selected: dict[str, int] = {}
+    if mapping:
+        for column, input_id in mapping.items():
+            index = find(column)
+            if index is None:
+                raise ValueError(f"{source}: column {column!r} not found; the file has {header}")
+            selected[input_id] = index
+    else:
+        for index, name in enumerate(names):
+            if index == time_index:
+                continue
+            if name not in CYCLE_INPUT_IDS:
+                raise ValueError(
+                    f"{source}: unknown input column {name!r}; allowed are {CYCLE_INPUT_IDS} "
+                    "(or map file columns to them with columns=)"
+                )
+            selected[name] = index
+
+    def unit_of(index: int) -> str | None:
+        column = header[index]
+        return (
+            given.get(column)
+            or given.get(names[index])
+            or _split_header_unit(column)[1]
+            or units_row.get(column)
+        )
+
+    def numbers(index: int) -> np.ndarray:
+        values = np.empty(len(rows) - 1)
+        for row_number, row in enumerate(rows[1:]):
+            cell = row[index]
+            if cell in _MISSING:
+                values[row_number] = np.nan
+                continue
+            try:
+                values[row_number] = float(cell.replace(decimal, ".") if decimal != "." else cell)
+            except ValueError:
+                raise ValueError(
+                    f"{source}: column {header[index]!r}, line {first_line + row_number}: "
+                    f"{cell!r} is not a number"
+                ) from None
+        return values
+
+    seconds = _SECONDS_PER.get(unit_of(time_index) or time_unit)
+    if seconds is None:
+        raise ValueError(
+            f"{source}: time unit {unit_of(time_index) or time_unit!r}; allowed are "
+            f"{list(_SECONDS_PER)}"
+        )
     values = {}
-    for column, (name, unit) in enumerate(header[1:], start=1):
-        if name not in specs:
-            raise ValueError(f"{source}: unknown input column {name!r}; allowed are {INPUT_IDS}")
-        data = table[:, column]
-        if specs[name].unit == "K" and unit == "degC":
-            data = data + _CELSIUS_OFFSET
-        elif unit != specs[name].unit:
-            allowed = [specs[name].unit] + (["degC"] if specs[name].unit == "K" else [])
-            raise ValueError(f"{source}: {name} has unit {unit!r}; allowed are {allowed}")
-        values[name] = data
-    return make_inputs(table[:, 0], **values)
+    for input_id, index in selected.items():
+        spec = next(spec for spec in _ALL_INPUTS if spec.id == input_id)
+        convert = _converter(unit_of(index) or spec.unit, input_id, source)
+        values[input_id] = convert(numbers(index))
+    try:
+        return make_inputs(numbers(time_index) * seconds, **values)
+    except ValueError as error:
+        raise ValueError(f"{source}: {error}") from None
 
 
 def builtin_inputs(name: str = BUILTIN_PROFILE) -> xr.Dataset:
     """A shipped profile: by default the 2120 s step profile (the paper's Fig. 4 kind: every
-    input stepped); :data:`WINTER_PROFILE` is the heat pump's winter day."""
+    input stepped); :data:`WINTER_PROFILE` is the heat pump's winter day.
+
+    Parameters
+    ----------
+    name
+        File name of the profile inside ``pymc_vcc/data``.
+    """
     shipped = (BUILTIN_PROFILE, WINTER_PROFILE)
     if name not in shipped:
         raise ValueError(f"unknown shipped profile {name!r}; shipped are {list(shipped)}")
@@ -203,7 +413,23 @@ def constant_inputs(
     **optional: float,
 ) -> xr.Dataset:
     """A profile holding the inputs constant for ``duration`` seconds (SI units); ``optional``
-    may set the optional inputs (``RH_indoor``)."""
+    may set the optional inputs (``RH_indoor``).
+
+    Parameters
+    ----------
+    duration
+        Length of the profile, s.
+    valve_opening
+        Expansion valve opening, fraction of full opening (0.02 to 1).
+    compressor_speed
+        Compressor speed, Hz (10 to 150).
+    T_ambient
+        Outdoor air temperature, K.
+    T_indoor
+        Indoor air temperature, K.
+    **optional
+        ``RH_indoor``: indoor relative humidity, fraction (default 0, dry air).
+    """
     return make_inputs(
         np.array([0.0, float(duration)]),
         valve_opening=valve_opening,

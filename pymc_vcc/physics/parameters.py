@@ -52,7 +52,21 @@ ParameterIds = tuple[tuple[str, str], ...]
 
 @dataclass(frozen=True)
 class ParameterSpec:
-    """One calibration parameter: id, long name, unit, bounds [low, high] and nominal value."""
+    """One calibration parameter: id, long name, unit, bounds [low, high] and nominal value.
+
+    Attributes
+    ----------
+    id
+        Short id (``M0``, ``CF_VOL``, ...).
+    name
+        Long name.
+    unit
+        Unit of the values (``kg``, ``1``, ``W/(m2 K)``, ``m3/s``, ``W``, ``Hz``, ``m``).
+    low, high
+        Physical bounds, in ``unit``.
+    nominal
+        Nominal value, in ``unit``, inside the bounds.
+    """
 
     id: str
     name: str
@@ -80,7 +94,15 @@ class ParameterSpec:
 @dataclass(frozen=True)
 class ParameterTable:
     """The ordered parameter specs of a unit: exactly the ids and units of ``expected`` (its
-    cycle model's parameters; Table III by default), in that order."""
+    cycle model's parameters; Table III by default), in that order.
+
+    Attributes
+    ----------
+    specs
+        One :class:`ParameterSpec` per parameter.
+    expected
+        (id, unit) pairs the cycle model expects, in vector order.
+    """
 
     specs: tuple[ParameterSpec, ...]
     expected: ParameterIds = TABLE_III

@@ -111,7 +111,7 @@ def simulate(
     xarray.Dataset
         Variables ``TD, PD, TS, PS, TC, PC, TE, PE, MDOT`` over ``time`` with ``units`` attrs;
         attrs ``status`` ("ok" | "failed"), ``failure_reason``, ``solver``, ``n_rhs``,
-        ``n_jac``, ``n_steps``, ``wall_time`` (s), ``mass_error`` (max |M - M0|/M0
+        ``n_jac``, ``n_steps``, ``wall_time`` (s), ``mass_error`` (max ``|M - M0| / M0``
         on the grid), ``source_integral`` (∫|ṁ_src| dt, kg).
     """
     unit = _builtin_unit() if unit is None else unit
@@ -245,10 +245,36 @@ class VCCSimulator:
     26); the others stay at nominal, or at ``fixed`` values. Samplers refuse priors reaching
     outside the unit's parameter bounds (``parameter_bounds``) unless
     ``allow_outside_unit_bounds=True`` (extrapolation). ``solver`` picks the ODE solver
-    (default: the unit's ``solver.method``). ``settle`` (s) runs the unit that long at the
-    profile's first inputs before the profile starts, so that a record taken from a running
-    unit starts from its steady state rather than a start-up transient; the settling is not
-    returned and times start at 0 s.
+    (default: the unit's ``solver.method``).
+
+    Parameters
+    ----------
+    unit
+        Unit description (default: the built-in 3.5 kW R410A split).
+    inputs
+        Input profile (default: the built-in 2120 s step profile).
+    outputs
+        Output ids returned (default: the cycle's nine; ``W_comp``, the compressor's
+        electrical power in W, may be added).
+    t_window
+        (t_start, t_end), s: simulate up to ``t_end``, return the outputs from ``t_start`` on
+        (default: the whole profile).
+    controller
+        Switch the virtual PI charge controller on/off (default: the unit's setting).
+    max_wall_time
+        Wall-clock limit of one simulation, s (default: the unit's ``solver.max_wall_time``).
+    parameters
+        Ids a sampler calibrates (default: all of the unit's).
+    fixed
+        Values of parameters not calibrated, by id, in their units (default: nominal).
+    allow_outside_unit_bounds
+        Let priors reach outside the unit's parameter bounds.
+    solver
+        ``"radau"`` or ``"cvode"`` (default: the unit's ``solver.method``).
+    settle
+        Seconds run at the profile's first inputs before it starts (not returned; times
+        start at 0 s), so that a record of a running unit starts from its steady state
+        rather than a start-up transient (default 0).
     """
 
     def __init__(
@@ -382,6 +408,21 @@ def operating_point(
     heat cooling, condenser heat heating), ``COP`` (capacity over compressor and fan power),
     ``energy_balance_error`` ((Q_cond - Q_evap - W_ref) / Q_cond), ``drift`` (largest relative
     change of an output over the last 100 s) and the run's ``status``/``failure_reason``.
+
+    Parameters
+    ----------
+    unit
+        Unit description (default: the built-in 3.5 kW R410A split).
+    params
+        Parameter values by id; missing ids take their nominal value.
+    duration
+        Simulated time at constant inputs, s.
+    controller
+        Switch the virtual PI charge controller on/off (default: the unit's setting).
+    solver
+        ``"radau"`` or ``"cvode"`` (default: the unit's ``solver.method``).
+    **conditions
+        Inputs that differ from the unit's ``[rating]`` point, SI (K, Hz, fractions).
     """
     from pymc_vcc.physics.inputs import constant_inputs
     from pymc_vcc.physics.refrigerant import saturation_state

@@ -31,6 +31,7 @@ HEAT_PUMP_UNIT = "heat_pump_3p5kw_r410a.toml"
 """The same split unit as a heat pump in heating mode, inside ``pymc_vcc/data``."""
 
 SHIPPED_UNITS = (BUILTIN_UNIT, HEAT_PUMP_UNIT)
+"""File names of the units shipped inside ``pymc_vcc/data``, which :func:`load_unit` accepts."""
 
 
 @dataclass(frozen=True)
@@ -189,7 +190,28 @@ _FRACTIONS = {
 
 @dataclass(frozen=True)
 class Unit:
-    """A complete, validated unit description."""
+    """A complete, validated unit description: one field per section of the unit file
+    (``models/README.md``), SI units.
+
+    Attributes
+    ----------
+    name, description
+        ``[unit] name`` and ``description``.
+    refrigerant
+        ``R410A``, ``R32`` or ``R134a``.
+    cycle
+        Name of the cycle model (``split-cooling`` or ``heat-pump-heating``).
+    discretisation, solver, controller
+        Finite volumes per coil; ODE solver and tolerances; the virtual PI charge controller.
+    compressor, expansion_valve, condenser, evaporator, liquid_line, vapor_line, suction_tank
+        The components' fixed data (m, m², m³, W/K, ...).
+    outdoor_fan, indoor_fan, air, pressure_drop
+        Fan speed fractions; air density (kg/m³) and heat capacity (J/(kg K)); friction.
+    rating
+        The rating point's inputs (fraction, Hz, K), the point ``operating_point`` uses.
+    parameters
+        The calibration parameters with their units, bounds and nominal values.
+    """
 
     name: str
     description: str
@@ -397,7 +419,12 @@ def unit_to_dict(unit: Unit) -> dict[str, Any]:
 
 def load_unit(path: str | Path | None = None) -> Unit:
     """Load and validate a unit description: a TOML file, or the file name of a shipped one
-    (:data:`SHIPPED_UNITS`); ``None`` loads the built-in 3.5 kW R410A split in cooling mode."""
+    (:data:`SHIPPED_UNITS`); ``None`` loads the built-in 3.5 kW R410A split in cooling mode.
+
+    Parameters
+    ----------
+    path
+        A TOML file, the file name of a shipped unit, or None."""
     name = BUILTIN_UNIT if path is None else str(path)
     if name in SHIPPED_UNITS and (path is None or not Path(name).is_file()):
         text = resources.files("pymc_vcc").joinpath("data", name).read_text()

@@ -40,6 +40,7 @@ from pymc_vcc.studies.common import (
     write_netcdf,
     write_text,
 )
+from pymc_vcc.studies.precision import decimals, fixed
 
 INTERVAL = 0.95  # central posterior interval reported and checked for the truth
 CHARGE = "M0"
@@ -90,9 +91,10 @@ class LeakResult:
             f"{'P(M0 < ' + format(self.alarm_threshold_kg, '.2f') + ' kg)':>18}",
         ]
         for row in self.table:
+            places = decimals(row["sd_kg"])  # the mean as precise as its sd, never sd "0.000"
             lines.append(
-                f"{row['mean_kg']:10.3f} {row['sd_kg']:9.3f} {row['reference_kg']:15.2f} "
-                f"{row['p_leak']:18.3f}"
+                f"{fixed(row['mean_kg'], places, 10)} {fixed(row['sd_kg'], places, 9)} "
+                f"{row['reference_kg']:15.2f} {row['p_leak']:18.3f}"
             )
         return "\n".join(lines)
 
@@ -357,7 +359,7 @@ def _write(result: LeakResult, settings: StudySettings) -> list[str]:
         table,
         header
         + "".join(
-            f"{r['reference_kg']},{r['mean_kg']:.5f},{r['sd_kg']:.5f},{r['p_leak']:.4f}\n"
+            f"{r['reference_kg']},{r['mean_kg']:.8g},{r['sd_kg']:.8g},{r['p_leak']:.4f}\n"
             for r in result.table
         ),
     )

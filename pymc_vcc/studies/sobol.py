@@ -61,7 +61,20 @@ def sobol_study(
     inputs: xr.Dataset | None = None,
     window: tuple[float, float] = (20.0, 1060.0),
 ) -> SobolResult:
-    """First- and total-order Sobol indices of the nine outputs' averages over ``window`` (s)."""
+    """First- and total-order Sobol indices of the nine outputs' averages over ``window`` (s).
+
+    Parameters
+    ----------
+    settings
+        Budget (its ``sobol_base`` is Saltelli's N), executor, output folder and seed.
+    unit
+        Unit description (default: the built-in split unit); the parameters vary over its
+        bounds.
+    inputs
+        Input profile (default: the built-in 2120 s step profile), run up to ``window[1]``.
+    window
+        (start, end) of the averaging, s (the paper's appendix: 20 s to 1060 s).
+    """
     started = time.perf_counter()
     unit = settings.unit(unit)
     simulator = VCCSimulator(unit, inputs, t_window=(0.0, window[1]))

@@ -49,6 +49,7 @@ from pymc_vcc.studies.leak import (
     reference_data,
     shared_table,
 )
+from pymc_vcc.studies.precision import significant
 
 METHODS: dict[str, tuple[str, bool, BatchDistance]] = {
     "ks": ("rejection", False, ks_distances),
@@ -93,8 +94,9 @@ class ValidationResult:
         ]
         for row in self.rows:
             lines.append(
-                f"{row['method']:>12} {row['datasets']:8d} {row['mean_abs_error_kg']:12.4f} "
-                f"{row['median_sd_kg']:9.4f} {row['coverage']:9.2f} "
+                f"{row['method']:>12} {row['datasets']:8d} "
+                f"{significant(row['mean_abs_error_kg'], width=12)} "
+                f"{significant(row['median_sd_kg'], width=9)} {row['coverage']:9.2f} "
                 f"{row['simulations_per_dataset']:6.0f} {row['median_wall_seconds']:9.1f}"
             )
         if self.table_simulations:

@@ -96,7 +96,7 @@ def add_likelihood(
             the likelihood of every sample of a model that is the unit.
         error_budget: instead of ``sensor_noise``, the likelihood of plateau summaries under
             sensor and model errors (:mod:`pymc_vcc.inference.error_model`): for a real unit.
-        prior: a :class:`UniformPrior`, a :class:`GMMPrior` or bounds name -> (low, high)
+        prior: a :class:`UniformPrior`, a :class:`.GMMPrior` or bounds name -> (low, high)
             (default: uniform on the simulator's bounds).
         parameters: parameters to calibrate (default: those of ``prior``).
         outputs: outputs in the likelihood (default: all of ``observed``).

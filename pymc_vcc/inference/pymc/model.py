@@ -238,6 +238,14 @@ def gmm_prior_variable(name: str, prior: GMMPrior, **kwargs) -> TensorVariable:
     Its log-density equals :meth:`GMMPrior.logpdf`; it is sampled in the logit space of the
     bounds (the :class:`LogitBox` transform), where the mixture is Gaussian. Must be called inside a
     model context; ``kwargs`` go to ``pm.CustomDist`` (e.g. ``dims``).
+
+    Parameters
+    ----------
+    name
+        Name of the PyMC variable.
+    prior
+        The mixture, e.g. fitted to a previous posterior (``GMMPrior.fit``); values in its
+        parameters' units.
     """
     if not isinstance(prior, GMMPrior):
         raise TypeError(f"prior must be a GMMPrior, got {type(prior).__name__}")

@@ -438,7 +438,7 @@ class ParallelKernel:
 
     def mutate(self) -> None:
         """The stock kernel's Metropolis–Hastings moves, each step's proposals simulated as one
-        batch, at most :attr:`max_steps` steps."""
+        batch, at most ``max_steps`` steps."""
         self.n_steps = 1
         old_correlation = 2
         correlation = Pearson(self.tempered_posterior)

@@ -96,6 +96,13 @@ class Refrigerant:
     :mod:`pymc_vcc.physics.refrigerant`. The methods take array-likes (broadcast together), return
     arrays of the broadcast shape, and raise ValueError naming the offending input and the
     valid range instead of extrapolating.
+
+    Parameters
+    ----------
+    name
+        Refrigerant name (``R410A``, ``R32``, ``R134a``).
+    tables
+        Its property tables (:func:`load_refrigerant` builds them).
     """
 
     def __init__(self, name: str, tables: PropertyTables) -> None:
@@ -248,6 +255,15 @@ def load_refrigerant(
     ``cache_dir``, else ``$PYMC_VCC_CACHE``, else ``~/.cache/pymc_vcc``; the first call builds
     the tables (about a second) and writes them there, later calls and other processes read
     them. Within a process the result is memoised.
+
+    Parameters
+    ----------
+    name
+        Refrigerant name, one of :data:`SUPPORTED_FLUIDS`.
+    cache_dir
+        Folder of the table cache (default: ``$PYMC_VCC_CACHE``, else ``~/.cache/pymc_vcc``).
+    resolution
+        Table nodes (saturation, pressure, liquid and vapour enthalpy).
     """
     canonical = {key.lower(): key for key in SUPPORTED_FLUIDS}.get(str(name).lower())
     if canonical is None:
