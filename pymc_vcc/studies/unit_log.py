@@ -423,7 +423,20 @@ def record_study(
     """Calibrate a unit's log (``pymc-vcc calibrate``), or identify its charge against a
     commissioning result (``pymc-vcc leak LOG --prior``): load and check the log before any
     simulation, calibrate, and write the posterior, its mixture prior for later records, the
-    predictive check and a figure into ``settings.out``."""
+    predictive check and a figure into ``settings.out``.
+
+    Args:
+        settings: where and how it runs (:class:`~pymc_vcc.studies.StudySettings`; budget
+            ``smoke``, ``small`` or ``paper``, see :data:`RECORD_BUDGETS`).
+        log: the CSV log.
+        column_map: its column map (TOML; default: ``LOG.columns.toml`` beside it).
+        unit: the unit description (default: the built-in split unit).
+        commissioning: a folder (or ``posterior.nc``) written by a calibration of the healthy
+            unit; then the leak check against it.
+        drift: sd of each nuisance parameter's change since commissioning, a fraction of its
+            range.
+        alarm_fraction: the alarm's threshold, a fraction of the commissioned charge.
+    """
     from pymc_vcc.io.measurements import load_log
     from pymc_vcc.plots import plot_charge_posteriors, save_figure
     from pymc_vcc.studies.common import write_json, write_netcdf, write_text
