@@ -28,7 +28,15 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.physics.failures": ("FailureKind",),
     "pymc_vcc.physics.simulate": ("VCCSimulator", "operating_point"),
     "pymc_vcc.inference.simulator": ("Simulator", "check_simulator"),
-    "pymc_vcc.io.measurements": ("load_measurements", "Measurements", "example_log_path"),
+    "pymc_vcc.io.measurements": (
+        "load_measurements",
+        "load_log",
+        "load_column_map",
+        "ColumnMap",
+        "Measurements",
+        "example_log_path",
+    ),
+    "pymc_vcc.inference.error_model": ("ErrorBudget", "SensorAccuracy"),
     "pymc_vcc.inference.distances": (
         "ks_distance",
         "ks_distances",
@@ -56,6 +64,8 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "sobol_study",
         "validation_study",
     ),
+    "pymc_vcc.studies.unit_log": ("calibrate_record", "record_study"),
+    "pymc_vcc.studies.truths": ("generate_truth",),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 

@@ -58,7 +58,35 @@ def _report(args: argparse.Namespace, text: str, summary: dict) -> int:
     return 0
 
 
+def _record(args: argparse.Namespace) -> int:
+    """``calibrate LOG`` and ``leak LOG``: a unit's own record."""
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.unit_log import record_study
+
+    result = record_study(
+        _settings(args),
+        args.log,
+        column_map=args.columns,
+        unit=load_unit(args.unit) if args.unit else None,
+        commissioning=getattr(args, "prior", None),
+        drift=args.drift,
+        alarm_fraction=args.alarm_fraction,
+    )
+    text = (
+        f"{result.format_table()}\n\n{result.n_simulations} simulations, "
+        f"{result.wall_seconds:.0f} s"
+    )
+    misfit = [name for name, check in result.checks.items() if check["misfit"]]
+    if misfit:
+        text += f"\nwarning: the model cannot reproduce {', '.join(misfit)}"
+    return _report(args, text, result.summary())
+
+
 def _leak(args: argparse.Namespace) -> int:
+    if args.log is not None:
+        return _record(args)
+    if args.prior is not None:
+        raise ValueError("--prior (a commissioning result) needs a LOG to identify the charge on")
     from pymc_vcc.studies import leak_study
 
     inputs = _inputs(args)
@@ -310,6 +338,26 @@ def _add_shared_sampler_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_record_options(parser: argparse.ArgumentParser) -> None:
+    """Options of the commands that read a unit's own log."""
+    parser.add_argument(
+        "--columns",
+        metavar="TOML",
+        help="column map of the log: [columns] file column = id, [units] file column = unit, "
+        "time_column (default: LOG.columns.toml beside the log)",
+    )
+    parser.add_argument(
+        "--unit", metavar="TOML", help="unit description (default: the built-in split unit)"
+    )
+    parser.add_argument(
+        "--drift",
+        type=float,
+        default=0.03,
+        help="with --prior: sd of each nuisance parameter's change since commissioning, as a "
+        "fraction of its range (default 0.03)",
+    )
+
+
 def _add_leak_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method",
@@ -457,10 +505,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     estimate.set_defaults(handler=_estimate)
 
-    leak = commands.add_parser("leak", help="refrigerant-leak identification (Table II)")
+    leak = commands.add_parser(
+        "leak",
+        help="the charge of a unit's LOG against its commissioning (--prior), or without LOG "
+        "the paper's idealised study (Table II: M0 alone, the other 25 parameters known)",
+    )
+    leak.add_argument("log", nargs="?", metavar="LOG", help="a CSV log of the unit")
+    leak.add_argument(
+        "--prior",
+        metavar="COMMISSIONING",
+        help="the folder (or posterior.nc) written by `pymc-vcc calibrate` at commissioning",
+    )
     _add_study_options(leak, "results/leak", "small")
     _add_leak_options(leak)
+    _add_record_options(leak)
     leak.set_defaults(handler=_leak)
+
+    calibrate = commands.add_parser(
+        "calibrate",
+        help="calibrate a unit on its own CSV log (commissioning): the charge among the "
+        "parameters that drift, sensor and model errors accounted for",
+    )
+    calibrate.add_argument("log", metavar="LOG", help="a CSV log of the unit")
+    _add_study_options(calibrate, "results/calibrate", "small")
+    _add_record_options(calibrate)
+    calibrate.set_defaults(handler=_record, alarm_fraction=0.9)
 
     validate = commands.add_parser(
         "validate",

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from pymc_vcc.io.measurements import (
-    EXAMPLE_COLUMNS,
-    EXAMPLE_UNITS,
+    column_map_beside,
     example_log_path,
+    load_column_map,
     load_measurements,
     unit_converter,
 )
@@ -21,11 +21,13 @@ LOG_START = 300.0
 NOISE_SI = {"TD": 0.3, "PD": 5e3, "TS": 0.2, "PS": 3e3, "TC": 0.2, "TE": 0.2, "MDOT": 2e-4}
 """Sensor noise sd of the example log, SI."""
 
+EXAMPLE = load_column_map(column_map_beside(example_log_path()))
+
 
 @pytest.fixture(scope="module")
 def example():
     return load_measurements(
-        example_log_path(), EXAMPLE_COLUMNS, EXAMPLE_UNITS, time_column="Timestamp"
+        example_log_path(), EXAMPLE.columns, EXAMPLE.units, time_column="Timestamp"
     )
 
 
@@ -100,14 +102,14 @@ def test_example_log_reports_the_outage_and_the_sensor_dropout(example):
 
 def test_choosing_the_second_segment_restarts_time_at_zero():
     measured = load_measurements(
-        example_log_path(), EXAMPLE_COLUMNS, EXAMPLE_UNITS, time_column="Timestamp", segment=1
+        example_log_path(), EXAMPLE.columns, EXAMPLE.units, time_column="Timestamp", segment=1
     )
     assert measured.report.kept == measured.report.segments[1]
     assert measured.inputs.attrs["t_offset"] == measured.report.kept[0]
     assert measured.observed["time"].values[0] == 0.0
     with pytest.raises(ValueError, match="2 gap-free segment"):
         load_measurements(
-            example_log_path(), EXAMPLE_COLUMNS, EXAMPLE_UNITS, time_column="Timestamp", segment=2
+            example_log_path(), EXAMPLE.columns, EXAMPLE.units, time_column="Timestamp", segment=2
         )
 
 

@@ -734,41 +734,97 @@ def load_measurements(
     return Measurements(inputs=inputs, observed=observed, report=report)
 
 
-EXAMPLE_COLUMNS: dict[str, str] = {
-    "EEV_position_pct": "valve_opening",
-    "Compressor_rpm": "compressor_speed",
-    "T_outdoor_C": "T_ambient",
-    "T_return_air_C": "T_indoor",
-    "T_discharge_C": "TD",
-    "P_discharge_barg": "PD",
-    "T_suction_C": "TS",
-    "P_suction_barg": "PS",
-    "T_liquid_C": "TC",
-    "T_evap_out_C": "TE",
-    "Mass_flow_g_s": "MDOT",
-}
-"""Column mapping of the example log (file column -> id)."""
+COLUMN_MAP_SUFFIX = ".columns.toml"
+"""A log's column map sits beside it: ``LOG.csv`` -> ``LOG.columns.toml``."""
 
-EXAMPLE_UNITS: dict[str, str] = {
-    "EEV_position_pct": "%",
-    "Compressor_rpm": "rpm",
-    "T_outdoor_C": "degC",
-    "T_return_air_C": "degC",
-    "T_discharge_C": "degC",
-    "P_discharge_barg": "barg",
-    "T_suction_C": "degC",
-    "P_suction_barg": "barg",
-    "T_liquid_C": "degC",
-    "T_evap_out_C": "degC",
-    "Mass_flow_g_s": "g/s",
-}
-"""Units of the example log's columns."""
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """How to read a log: file column -> id, file column -> unit, and the time column.
+
+    Written as TOML: ``time_column = "..."`` (optionally ``time_unit``, ``time_format``), a
+    ``[columns]`` table (file column = id) and an optional ``[units]`` table (file column =
+    unit).
+    """
+
+    columns: dict[str, str]
+    units: dict[str, str] = field(default_factory=dict)
+    time_column: str = "time"
+    time_unit: str = "s"
+    time_format: str | None = None
+
+
+def load_column_map(path: str | Path) -> ColumnMap:
+    """Read a column map (TOML, see :class:`ColumnMap`); errors name the file and the key."""
+    import tomllib
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"column map {path} does not exist")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"column map {path} is not valid TOML: {error}") from None
+    allowed = {"columns", "units", "time_column", "time_unit", "time_format"}
+    unknown = sorted(set(data) - allowed)
+    if unknown:
+        raise ValueError(
+            f"column map {path}: unknown key(s) {unknown}; allowed are {sorted(allowed)}"
+        )
+    columns = data.get("columns")
+    if not isinstance(columns, dict) or not columns:
+        raise ValueError(f"column map {path} needs a [columns] table: file column = id")
+    for table in ("columns", "units"):
+        bad = [k for k, v in data.get(table, {}).items() if not isinstance(v, str)]
+        if bad:
+            raise ValueError(f"column map {path}: [{table}] values must be strings, not for {bad}")
+    return ColumnMap(
+        columns=dict(columns),
+        units=dict(data.get("units", {})),
+        time_column=str(data.get("time_column", "time")),
+        time_unit=str(data.get("time_unit", "s")),
+        time_format=data.get("time_format"),
+    )
+
+
+def column_map_beside(log: str | Path) -> Path:
+    """Where the column map of ``log`` is looked for: ``LOG.columns.toml`` beside it."""
+    log = Path(log)
+    return log.with_name(log.stem + COLUMN_MAP_SUFFIX)
+
+
+def load_log(
+    path: str | Path, column_map: str | Path | ColumnMap | None = None, **options
+) -> Measurements:
+    """:func:`load_measurements` with a column map (default: the one beside the log);
+    ``options`` as for :func:`load_measurements`."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"log {path} does not exist")
+    if column_map is None:
+        beside = column_map_beside(path)
+        if not beside.is_file():
+            raise FileNotFoundError(
+                f"no column map for {path}: write {beside} ([columns] file column = id) or pass one"
+            )
+        column_map = beside
+    if not isinstance(column_map, ColumnMap):
+        column_map = load_column_map(column_map)
+    return load_measurements(
+        path,
+        column_map.columns,
+        column_map.units,
+        time_column=column_map.time_column,
+        time_unit=column_map.time_unit,
+        time_format=column_map.time_format,
+        **options,
+    )
 
 
 def example_log_path() -> Path:
     """Path of the example field log shipped in ``pymc_vcc/data/example_log.csv``: the built-in
     unit at nominal parameters on the built-in profile from 300 s to 1800 s, sampled every
     1.5-3.5 s with sensor noise, an 80 s logger outage and a 45 s suction-temperature drop-out
-    (made by ``scripts/make_example_log.py``). Load it with ``load_measurements(path,
-    EXAMPLE_COLUMNS, EXAMPLE_UNITS, time_column="Timestamp")``."""
+    (made by ``scripts/make_example_log.py``). Its column map ships beside it, so
+    ``load_log(example_log_path())`` reads it."""
     return Path(str(resources.files("pymc_vcc").joinpath("data", EXAMPLE_LOG)))

@@ -459,6 +459,20 @@ def input_segments(inputs: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
     return edges, table[keep]
 
 
+def with_settling(inputs: xr.Dataset, seconds: float) -> xr.Dataset:
+    """The profile preceded by ``seconds`` s at its first inputs (times shifted by ``seconds``):
+    a unit that has run at those inputs before the record starts."""
+    if not (np.isfinite(seconds) and seconds >= 0.0):
+        raise ValueError(f"settling time must be a non-negative number of seconds, got {seconds}")
+    if seconds == 0.0:
+        return inputs
+    first = inputs.isel(time=[0]).assign_coords(time=[0.0])
+    shifted = inputs.assign_coords(time=inputs["time"].values + float(seconds))
+    settled = xr.concat([first, shifted], dim="time")
+    settled["time"].attrs["units"] = "s"
+    return settled
+
+
 def window(inputs: xr.Dataset, t_end: float) -> xr.Dataset:
     """The profile cut at ``t_end`` seconds (which must lie inside it)."""
     time = np.asarray(inputs["time"].values, dtype=float)

@@ -19,6 +19,7 @@ import pytensor.tensor as pt
 from pytensor.graph.basic import Apply
 from pytensor.graph.op import Op
 
+from pymc_vcc.inference.error_model import ErrorBudget
 from pymc_vcc.inference.likelihood import log_likelihood
 from pymc_vcc.inference.noise import OutputNoise, SensorNoise
 from pymc_vcc.inference.priors import Bounds, Prior, UniformPrior, check_prior_support
@@ -53,12 +54,31 @@ class LogLikelihoodKernel(Op):
         output_storage[0][0] = np.atleast_1d(log_likelihood(observed, simulated, self.noise))
 
 
+class SummaryLikelihoodKernel(Op):
+    """PyTensor op ``(epsilon, observed, simulated) -> [log p(summaries | simulated)]`` under an
+    :class:`~pymc_vcc.inference.error_model.ErrorBudget` (which holds the observed summaries);
+    −inf for a failed simulation."""
+
+    __props__ = ("budget",)
+
+    def __init__(self, budget: ErrorBudget) -> None:
+        self.budget = budget
+
+    def make_node(self, epsilon, observed, simulated) -> Apply:
+        inputs = [pt.as_tensor_variable(value) for value in (epsilon, observed, simulated)]
+        return Apply(self, inputs, [pt.dvector()])
+
+    def perform(self, node, inputs, output_storage) -> None:
+        output_storage[0][0] = np.atleast_1d(self.budget.log_likelihood(inputs[2]))
+
+
 def add_likelihood(
     name: str,
     simulator: Simulator,
     observed: OutputData,
     *,
-    sensor_noise: SensorNoise,
+    sensor_noise: SensorNoise | None = None,
+    error_budget: ErrorBudget | None = None,
     prior: Prior | Bounds | None = None,
     parameters: Sequence[str] | None = None,
     outputs: Sequence[str] | None = None,
@@ -72,7 +92,10 @@ def add_likelihood(
             on the time grid of ``observed``.
         observed: measured outputs; a Dataset whose variables carry ``units`` (K, Pa, kg/s, W)
             so that each output gets its kind's noise (or name kinds in ``sensor_noise``).
-        sensor_noise: the sensors' noise (known scales; correlation and Student-t allowed).
+        sensor_noise: the sensors' noise (known scales; correlation and Student-t allowed):
+            the likelihood of every sample of a model that is the unit.
+        error_budget: instead of ``sensor_noise``, the likelihood of plateau summaries under
+            sensor and model errors (:mod:`pymc_vcc.inference.error_model`): for a real unit.
         prior: a :class:`UniformPrior`, a :class:`.GMMPrior` or bounds name -> (low, high)
             (default: uniform on the simulator's bounds).
         parameters: parameters to calibrate (default: those of ``prior``).
@@ -83,16 +106,29 @@ def add_likelihood(
         A :class:`~pymc_vcc.inference.pymc.model.SimulatorNode` (no noise outputs).
     """
     model = pm.modelcontext(None)
-    if not isinstance(sensor_noise, SensorNoise):
+    if (sensor_noise is None) == (error_budget is None):
+        raise ValueError("add_likelihood takes exactly one of sensor_noise and error_budget")
+    if error_budget is not None and not isinstance(error_budget, ErrorBudget):
+        raise TypeError(f"error_budget must be an ErrorBudget, got {type(error_budget).__name__}")
+    if sensor_noise is not None and not isinstance(sensor_noise, SensorNoise):
         raise TypeError(f"sensor_noise must be a SensorNoise, got {type(sensor_noise).__name__}")
-    if sensor_noise.learnable:
+    if sensor_noise is not None and sensor_noise.learnable:
         raise ValueError(
             "add_likelihood takes known noise scales (SensorNoise(learnable=False)); learnable "
             "scales are calibrated by the ABC paths (add_simulator, abc_rejection)"
         )
     info = check_simulator(simulator)
     data = prepare_observed(observed, outputs, info.output_names)
-    noise = sensor_noise.resolve(data)
+    if error_budget is not None and data.names != error_budget.outputs:
+        raise ValueError(
+            f"the error budget's outputs {list(error_budget.outputs)} differ from the observed "
+            f"outputs {list(data.names)}"
+        )
+    distance = (
+        SummaryLikelihoodKernel(error_budget)
+        if error_budget is not None
+        else LogLikelihoodKernel(sensor_noise.resolve(data))
+    )
     if prior is None:
         prior = UniformPrior(simulator_bounds(simulator, parameters))
     elif not isinstance(prior, Prior):
@@ -116,7 +152,7 @@ def add_likelihood(
         name,
         function,
         pt.stack([variables[n] for n in prior.names]),
-        distance=LogLikelihoodKernel(noise),
+        distance=distance,
         sum_stat="identity",
         epsilon=1.0,
         signature="(p)->()",
@@ -126,4 +162,4 @@ def add_likelihood(
     return SimulatorNode(variable, prior, prior.names, (), data, function, variables)
 
 
-__all__ = ["LogLikelihoodKernel", "add_likelihood"]
+__all__ = ["LogLikelihoodKernel", "SummaryLikelihoodKernel", "add_likelihood"]

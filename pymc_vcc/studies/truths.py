@@ -1,0 +1,196 @@
+"""Units that are not the model: truth generators for data the inference model did not make.
+
+A real unit differs from the 10-volume model that calibrates it. Each *variant* draws a unit
+and its sensors that differ the way real ones do, simulates it from its steady state at the
+record's first inputs, and returns what a data logger would record: the outputs as its sensors
+read them and the inputs as they were measured.
+
+* ``model``: the inference model itself, typical white sensor noise (the idealised case);
+* ``fine``: the unit discretised finer, 20, 25 or 30 volumes per coil (model-form error);
+* ``lag``: each sensor a first-order lag of 5-30 s (a strap-on pipe sensor);
+* ``bias``: each sensor off by a constant within its accuracy class (±0.5 K, ±1 % of the
+  pressure reading, ±2 % of the mass flow);
+* ``inputs``: the logged inputs off the true ones (ambient and indoor ±0.5 K, speed ±1 %,
+  valve ±2 % of the reading, each a constant per record plus noise per input step);
+* ``drift``: every parameter but the charge moved by up to ±15 % from nominal (fouling,
+  airflow, valve wear), inside the unit's bounds;
+* ``all``: all of the above at once.
+
+Every variant adds the typical white sensor noise of
+:meth:`~pymc_vcc.inference.noise.SensorNoise.typical`; charges are drawn uniformly from
+:data:`CHARGE_RANGE` unless given.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+from scipy.signal import lfilter
+
+from pymc_vcc.inference.noise import SensorNoise
+from pymc_vcc.physics.inputs import builtin_inputs, window
+from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.unit import Unit, load_unit
+
+VARIANTS: tuple[str, ...] = ("model", "fine", "lag", "bias", "inputs", "drift", "all")
+"""The truth generators, in the order the benchmark reports them."""
+
+CHARGE_RANGE = (1.0, 2.1)  # kg
+FINE_VOLUMES = (20, 25, 30)  # volumes per coil of a finer unit
+LAG_RANGE = (5.0, 30.0)  # s, first-order sensor time constant
+DRIFT = 0.15  # largest relative change of a non-charge parameter
+SETTLE = 600.0  # s at the first inputs before the record starts
+SENSOR_ACCURACY = {"temperature": 0.5, "pressure": 0.01, "mass_flow": 0.02, "power": 0.02}
+"""Bound of a sensor's constant error: K for temperatures, a fraction of the reading else."""
+INPUT_ACCURACY = {
+    "T_ambient": ("absolute", 0.5),
+    "T_indoor": ("absolute", 0.5),
+    "compressor_speed": ("relative", 0.01),
+    "valve_opening": ("relative", 0.02),
+}
+"""Bound of an input's logging error (K or a fraction of the reading)."""
+
+_KIND_OF_UNITS = {"K": "temperature", "Pa": "pressure", "kg/s": "mass_flow", "W": "power"}
+
+
+@dataclass(frozen=True)
+class Truth:
+    """One generated record and what made it.
+
+    Attributes:
+        variant: the generator (:data:`VARIANTS`).
+        observed: the outputs as the sensors read them (SI, ``units`` attrs).
+        inputs: the inputs as they were logged (the model is run on these).
+        charge: the true charge, kg.
+        parameters: every parameter of the true unit (id -> value, SI).
+        n_volumes: volumes per coil of the true unit.
+        lags: sensor time constants, s (output -> τ; empty without lags).
+        biases: sensor offsets in SI units (output -> offset; empty without biases).
+    """
+
+    variant: str
+    observed: xr.Dataset
+    inputs: xr.Dataset
+    charge: float
+    parameters: dict[str, float]
+    n_volumes: int
+    lags: dict[str, float] = field(default_factory=dict)
+    biases: dict[str, float] = field(default_factory=dict)
+
+
+def _uniform(rng: np.random.Generator, bound: float) -> float:
+    return float(rng.uniform(-bound, bound))
+
+
+def drifted_parameters(
+    unit: Unit, rng: np.random.Generator, drift: float = DRIFT
+) -> dict[str, float]:
+    """Every parameter but the charge at nominal × U(1 − drift, 1 + drift), inside its bounds."""
+    moved = {}
+    for spec in unit.parameters:
+        if spec.id == "M0":
+            continue
+        value = spec.nominal * (1.0 + _uniform(rng, drift))
+        moved[spec.id] = float(np.clip(value, spec.low, spec.high))
+    return moved
+
+
+def logged_inputs(inputs: xr.Dataset, rng: np.random.Generator) -> xr.Dataset:
+    """The inputs as a logger reads them: a constant error per input within its accuracy, plus
+    an error of a third of that per held step."""
+    logged = inputs.copy()
+    for name, (kind, bound) in INPUT_ACCURACY.items():
+        values = np.asarray(inputs[name].values, dtype=float)
+        error = _uniform(rng, bound) + rng.uniform(-bound / 3, bound / 3, values.size)
+        logged[name] = inputs[name].copy(
+            data=values + error if kind == "absolute" else values * (1.0 + error)
+        )
+    return logged
+
+
+def lagged(series: np.ndarray, tau: float, dt: float) -> np.ndarray:
+    """A first-order sensor of time constant ``tau`` (s) reading ``series`` sampled every
+    ``dt`` s, settled at the first value."""
+    a = np.exp(-dt / tau)
+    filtered, _ = lfilter([1.0 - a], [1.0, -a], series, zi=[a * series[0]])
+    return filtered
+
+
+def generate_truth(
+    variant: str,
+    seed: int | np.random.SeedSequence,
+    *,
+    unit: Unit | None = None,
+    inputs: xr.Dataset | None = None,
+    charge: float | None = None,
+    t_end: float = 1060.0,
+    parameters: Mapping[str, float] | None = None,
+    solver: str = "cvode",
+) -> Truth:
+    """Draw a true unit of ``variant`` and the record its logger would write.
+
+    Args:
+        variant: one of :data:`VARIANTS`.
+        seed: the record's seed (everything random in it is drawn from it).
+        unit: the nominal unit (default: the built-in split unit).
+        inputs: the true input profile (default: the built-in Fig. 4 profile).
+        charge: the true charge, kg (default: uniform on :data:`CHARGE_RANGE`).
+        t_end: length of the record, s.
+        parameters: non-charge parameters of the true unit (default: nominal, or drifted for
+            ``drift`` and ``all``); overrides the drift where given.
+        solver: ODE solver of the truth's simulation.
+
+    Raises:
+        ValueError: unknown variant.
+        RuntimeError: the true unit's simulation failed.
+    """
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
+    rng = np.random.default_rng(seed)
+    unit = load_unit() if unit is None else unit
+    every = variant == "all"
+    charge = float(rng.uniform(*CHARGE_RANGE)) if charge is None else float(charge)
+    truth_params = drifted_parameters(unit, rng) if every or variant == "drift" else {}
+    truth_params |= dict(parameters or {})
+    truth_params["M0"] = charge
+    n_volumes = unit.discretisation.n_volumes
+    if every or variant == "fine":
+        n_volumes = int(rng.choice(FINE_VOLUMES))
+    true_unit = unit.with_changes(discretisation={"n_volumes": n_volumes})
+    true_inputs = window(builtin_inputs() if inputs is None else inputs, t_end)
+    simulator = VCCSimulator(true_unit, true_inputs, solver=solver, settle=SETTLE)
+    clean = simulator(truth_params)
+    if clean.attrs["status"] != "ok":
+        raise RuntimeError(
+            f"the true unit's simulation ({variant}, seed {seed}) failed: "
+            f"{clean.attrs['failure_reason']}"
+        )
+    logged = logged_inputs(true_inputs, rng) if every or variant == "inputs" else true_inputs
+    read = clean.copy()
+    dt = float(np.diff(clean["time"].values[:2])[0])
+    lags, biases = {}, {}
+    for name in clean.data_vars:
+        values = np.asarray(clean[name].values, dtype=float)
+        if every or variant == "lag":
+            lags[name] = float(rng.uniform(*LAG_RANGE))
+            values = lagged(values, lags[name], dt)
+        if every or variant == "bias":
+            kind = _KIND_OF_UNITS[clean[name].attrs["units"]]
+            error = _uniform(rng, SENSOR_ACCURACY[kind])
+            biases[name] = error if kind == "temperature" else error * float(np.mean(values))
+            values = values + biases[name]
+        read[name] = clean[name].copy(data=values)
+    observed = SensorNoise.typical().measure(read, rng)
+    return Truth(
+        variant=variant,
+        observed=observed,
+        inputs=logged,
+        charge=charge,
+        parameters={spec.id: truth_params.get(spec.id, spec.nominal) for spec in unit.parameters},
+        n_volumes=n_volumes,
+        lags=lags,
+        biases=biases,
+    )

@@ -1,0 +1,510 @@
+"""Calibration of a real unit's record: the charge among the parameters that drift.
+
+The charge ``M0`` is inferred jointly with the parameters a real unit changes or that were never
+known exactly (:data:`NUISANCE`: the compressor and valve factors, the air-side conductances
+and the fan flows), marginalising them, under the error budget of
+:mod:`pymc_vcc.inference.error_model` (sensor noise estimated from the record, sensor biases
+within their accuracy, and the model's error against a finer unit whose other parameters are
+spread around nominal, whose logged inputs are off and whose sensors lag). Their prior is the
+commissioning posterior when there is one (plus drift), else the unit's box.
+
+The model starts from its steady state at the record's first inputs (:data:`SETTLE` s of
+settling), so a record taken from a running unit needs no start-up transient.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pymc as pm
+import xarray as xr
+
+from pymc_vcc.execution.executors import Executor
+from pymc_vcc.inference.error_model import (
+    ErrorBudget,
+    SensorAccuracy,
+    approximation_error,
+    bias_covariance,
+    lagged,
+    noise_variance,
+    plateau_windows,
+    predictive_check,
+    summarise,
+)
+from pymc_vcc.inference.priors import Prior, UniformPrior
+from pymc_vcc.inference.pymc.likelihood import add_likelihood
+from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.physics.inputs import input_segments
+from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.unit import Unit, load_unit
+
+CHARGE = "M0"
+NUISANCE: tuple[str, ...] = (
+    "CF_VOL",
+    "CF_POW",
+    "CF_PREF",
+    "CF_SHELL",
+    "CF_LEV",
+    "HTC_CA",
+    "HTC_EA",
+    "FO_FLOW",
+    "FI_FLOW",
+)
+"""Parameters inferred with the charge and marginalised: what a real unit changes (fouling,
+airflow, valve and compressor wear) or what was never known exactly."""
+
+SETTLE = 600.0  # s at the record's first inputs before it starts
+FINE_VOLUMES = 20  # volumes per coil of the finer unit that stands for model-form error
+FIXED_SPREAD = 0.2  # the parameters held fixed are known to ±20 % of nominal
+ERROR_DRAWS = 96  # draws of the model-error statistics
+PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
+
+
+@dataclass(frozen=True)
+class ErrorPair:
+    """Picklable: the unit's and the model's series for one draw of what is not inferred."""
+
+    model: VCCSimulator
+    fine_unit: Unit
+    times: np.ndarray
+    accuracy: SensorAccuracy
+
+    def __call__(self, draw: dict) -> tuple[np.ndarray, np.ndarray] | None:
+        true_inputs = self.model.inputs.copy()
+        for name, error in draw["input_errors"].items():
+            kind, _ = self.accuracy.inputs[name]
+            values = np.asarray(true_inputs[name].values, dtype=float)
+            shifted = values + error if kind == "absolute" else values * (1.0 + error)
+            true_inputs[name] = true_inputs[name].copy(data=shifted)
+        unit = VCCSimulator(
+            self.fine_unit,
+            true_inputs,
+            outputs=self.model.output_names,
+            t_window=self.model.t_window,
+            solver=self.model.solver,
+            settle=self.model.settle,
+        )
+        runs = [unit({**draw["fixed"], **draw["theta"]}), self.model(draw["theta"])]
+        if any(run.attrs["status"] != "ok" for run in runs):
+            return None
+        rows = [
+            np.stack([run[name].sel(time=self.times).values for name in self.model.output_names])
+            for run in runs
+        ]
+        dt = float(np.median(np.diff(self.times)))
+        return lagged(rows[0], draw["lags"], dt), rows[1]
+
+
+STEP_THRESHOLDS = {
+    "valve_opening": ("relative", 0.02),
+    "compressor_speed": ("relative", 0.02),
+    "T_ambient": ("absolute", 1.0),
+    "T_indoor": ("absolute", 1.0),
+}
+"""An input that moves this far from its value at a plateau's start begins a new plateau (K or
+a fraction of the value); smaller changes (a logged input's noise, slow drift) do not."""
+
+
+def plateau_edges(inputs: xr.Dataset) -> np.ndarray:
+    """Times at which the operating point steps, with the record's start and end, s."""
+    edges, _ = input_segments(inputs)
+    names = [name for name in STEP_THRESHOLDS if name in inputs.data_vars]
+    values = {
+        name: np.asarray(inputs[name].sel(time=edges[:-1], method="nearest").values)
+        for name in names
+    }
+    starts = [0]
+    for k in range(1, len(edges) - 1):
+        anchor = starts[-1]
+        for name in names:
+            kind, bound = STEP_THRESHOLDS[name]
+            change = values[name][k] - values[name][anchor]
+            if kind == "relative":
+                change /= max(abs(values[name][anchor]), 1e-12)
+            if abs(change) > bound:
+                starts.append(k)
+                break
+    return np.append(edges[starts], edges[-1])
+
+
+def fixed_spread(
+    unit: Unit, inferred: Sequence[str], spread: float
+) -> dict[str, tuple[float, float]]:
+    """The range of each parameter the calibration holds at nominal: ±``spread`` × nominal,
+    inside the unit's bounds."""
+    table = {}
+    for spec in unit.parameters:
+        if spec.id in inferred:
+            continue
+        low = max(spec.low, spec.nominal * (1.0 - spread))
+        high = min(spec.high, spec.nominal * (1.0 + spread))
+        table[spec.id] = (low, high)
+    return table
+
+
+def error_budget(
+    model: VCCSimulator,
+    observed: xr.Dataset,
+    prior: Prior,
+    executor: Executor,
+    rng: np.random.Generator,
+    *,
+    accuracy: SensorAccuracy | None = None,
+    n_draws: int = ERROR_DRAWS,
+    fine_volumes: int = FINE_VOLUMES,
+    spread: float = FIXED_SPREAD,
+) -> ErrorBudget:
+    """The error budget of ``observed`` (outputs of ``model``, on its time grid) for a
+    calibration of ``prior``'s parameters (see the module docstring)."""
+    accuracy = SensorAccuracy() if accuracy is None else accuracy
+    outputs = tuple(str(name) for name in observed.data_vars)
+    times = observed["time"].values
+    windows = plateau_windows(plateau_edges(model.inputs) - model.t_window[0], times)
+    values = np.stack([observed[name].values for name in outputs])
+    observed_summaries = summarise(values, windows)
+    units = [observed[name].attrs["units"] for name in outputs]
+    fixed = fixed_spread(model.unit, prior.names, spread)
+    thetas = prior.sample(n_draws, rng)
+    draws = [
+        {
+            "theta": dict(zip(prior.names, map(float, row), strict=True)),
+            "fixed": {pid: float(rng.uniform(lo, hi)) for pid, (lo, hi) in fixed.items()},
+            "input_errors": {
+                name: float(rng.uniform(-bound, bound))
+                for name, (_, bound) in accuracy.inputs.items()
+            },
+            "lags": rng.uniform(0.0, accuracy.lag, len(outputs)),
+        }
+        for row in thetas
+    ]
+    pair = ErrorPair(
+        model, model.unit.with_changes(discretisation={"n_volumes": fine_volumes}), times, accuracy
+    )
+    mean, model_cov, n_ok = approximation_error(pair, draws, windows, executor)
+    return ErrorBudget(
+        outputs=outputs,
+        windows=windows,
+        observed=observed_summaries,
+        mean=mean,
+        parts={
+            "noise": np.diag(noise_variance(values, windows)),
+            "bias": bias_covariance(observed_summaries, units, len(windows), accuracy),
+            "model": model_cov,
+        },
+        n_draws=n_ok,
+        n_failed=n_draws - n_ok,
+    )
+
+
+def box_prior(unit: Unit, parameters: Sequence[str]) -> UniformPrior:
+    """Uniform on the unit's bounds of ``parameters``."""
+    return UniformPrior(
+        {pid: (unit.parameters[pid].low, unit.parameters[pid].high) for pid in parameters}
+    )
+
+
+def calibrate_record(
+    observed: xr.Dataset,
+    inputs: xr.Dataset,
+    executor: Executor,
+    *,
+    unit: Unit | None = None,
+    prior: Prior | None = None,
+    parameters: Sequence[str] = (CHARGE, *NUISANCE),
+    accuracy: SensorAccuracy | None = None,
+    draws: int = 128,
+    error_draws: int = ERROR_DRAWS,
+    seed: int = 0,
+    solver: str = "cvode",
+    progressbar: bool = False,
+) -> xr.DataTree:
+    """The posterior of ``parameters`` given a record of a real unit.
+
+    Args:
+        observed: the recorded outputs (SI, ``units`` attrs) on a regular grid from 0 s.
+        inputs: the logged inputs over the record.
+        executor: runs the simulations.
+        unit: the unit description (default: the built-in split unit).
+        prior: prior of ``parameters`` (default: uniform on the unit's bounds); a
+            commissioning posterior's mixture for a later record.
+        parameters: the inferred parameters (default: the charge and :data:`NUISANCE`).
+        accuracy: the sensors' and logged inputs' accuracy.
+        draws: SMC particles.
+        error_draws: draws of the model-error statistics.
+        seed: seeds every random draw.
+        solver: ODE solver.
+
+    Returns:
+        The ArviZ DataTree; ``sample_stats`` also holds the predictive check per output
+        (``ppc_z_mean``, ``ppc_p_value``, ``ppc_misfit``), the error budget's size
+        (``error_draws``, ``error_failed``) and every simulation's count (``n_simulations``).
+    """
+    unit = load_unit() if unit is None else unit
+    prior = box_prior(unit, parameters) if prior is None else prior
+    rng = np.random.default_rng(seed)
+    t_end = float(observed["time"].values[-1])
+    model = VCCSimulator(
+        unit,
+        inputs,
+        outputs=[str(name) for name in observed.data_vars],
+        t_window=(0.0, t_end),
+        parameters=prior.names,
+        solver=solver,
+        settle=SETTLE,
+    )
+    budget = error_budget(
+        model, observed, prior, executor, rng, accuracy=accuracy, n_draws=error_draws
+    )
+    with pm.Model():
+        add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
+        tree = sample_smc_abc(draws, executor=executor, random_seed=seed, progressbar=progressbar)
+    check, n_check = _predictive_check(tree, model, budget, executor, rng)
+    stats = tree["sample_stats"].to_dataset()
+    coords = {"output": list(budget.outputs)}
+    for key in ("z_mean", "p_value", "misfit"):
+        stats[f"ppc_{key}"] = xr.DataArray(
+            [check[name][key] for name in budget.outputs], dims="output", coords=coords
+        )
+    stats["error_draws"] = budget.n_draws
+    stats["error_failed"] = budget.n_failed
+    smc = int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
+    stats["n_simulations"] = smc + 2 * error_draws + n_check
+    tree["sample_stats"] = xr.DataTree(stats)
+    misfit = [name for name in budget.outputs if check[name]["misfit"]]
+    if misfit:
+        warnings.warn(
+            "the model cannot reproduce "
+            + ", ".join(
+                f"{name} (mean standardised residual {check[name]['z_mean']:+.1f})"
+                for name in misfit
+            )
+            + ": the posterior rests on a model that misses these sensors",
+            stacklevel=2,
+        )
+    return tree
+
+
+def _predictive_check(
+    tree: xr.DataTree,
+    model: VCCSimulator,
+    budget: ErrorBudget,
+    executor: Executor,
+    rng: np.random.Generator,
+) -> tuple[dict[str, dict[str, float]], int]:
+    posterior = tree["posterior"]
+    names = list(model.parameter_names)
+    samples = np.column_stack([posterior[name].values.ravel() for name in names])
+    picks = rng.choice(len(samples), min(PREDICTIVE_DRAWS, len(samples)), replace=False)
+    thetas = [dict(zip(names, map(float, samples[k]), strict=True)) for k in picks]
+    runs = executor.map(model, thetas)
+    summaries = [
+        summarise(np.stack([run[name].values for name in budget.outputs]), budget.windows)
+        for run in runs
+        if run.attrs["status"] == "ok"
+    ]
+    return predictive_check(budget, np.asarray(summaries)), len(thetas)
+
+
+def charge_summary(tree: xr.DataTree, interval: float = 0.95) -> dict[str, float]:
+    """Posterior mean, sd and central interval of the charge, kg."""
+    draws = tree["posterior"][CHARGE].values.ravel()
+    low, high = np.quantile(draws, [(1 - interval) / 2, (1 + interval) / 2])
+    return {
+        "mean_kg": float(draws.mean()),
+        "sd_kg": float(draws.std()),
+        "low_kg": float(low),
+        "high_kg": float(high),
+    }
+
+
+RECORD_BUDGETS: dict[str, tuple[int, int]] = {
+    "smoke": (24, 12),
+    "small": (128, ERROR_DRAWS),
+    "paper": (512, 256),
+}
+"""Budget name -> (SMC particles, model-error draws) of a record's calibration."""
+
+POSTERIOR_FILE = "posterior.nc"
+PRIOR_FILE = "prior.nc"
+
+
+@dataclass
+class RecordResult:
+    """What a record's calibration found.
+
+    Attributes:
+        tree: the posterior DataTree (with the predictive check in ``sample_stats``).
+        charge: the charge's posterior mean, sd and 95 % interval, kg.
+        checks: per output, the predictive check (``z_mean``, ``p_value``, ``misfit``).
+        n_simulations: every simulation the result rests on.
+        wall_seconds: wall time, s.
+        alarm: P(charge < alarm fraction × commissioning charge), with a commissioning prior.
+        commissioning_kg: the commissioning posterior's mean charge, kg.
+    """
+
+    tree: xr.DataTree
+    charge: dict[str, float]
+    checks: dict[str, dict[str, float]]
+    n_simulations: int
+    wall_seconds: float
+    alarm: float | None = None
+    commissioning_kg: float | None = None
+
+    def summary(self) -> dict:
+        """The JSON summary."""
+        return {
+            "charge": self.charge,
+            "checks": self.checks,
+            "misfit_outputs": [name for name, c in self.checks.items() if c["misfit"]],
+            "alarm": self.alarm,
+            "commissioning_kg": self.commissioning_kg,
+            "n_simulations": self.n_simulations,
+            "wall_seconds": round(self.wall_seconds, 1),
+        }
+
+    def format_table(self) -> str:
+        """The charge and the predictive check, as engineers read them."""
+        c = self.charge
+        lines = [
+            f"charge M0 = {c['mean_kg']:.3f} ± {c['sd_kg']:.3f} kg "
+            f"(95 % interval {c['low_kg']:.3f} to {c['high_kg']:.3f} kg)"
+        ]
+        if self.alarm is not None:
+            lines.append(
+                f"leak alarm: P(M0 below the alarm threshold) = {self.alarm:.2f} "
+                f"(commissioned at {self.commissioning_kg:.3f} kg)"
+            )
+        lines.append("\noutput  z_mean  p_value  model reproduces it")
+        for name, check in self.checks.items():
+            verdict = "NO" if check["misfit"] else "yes"
+            lines.append(f"{name:<7} {check['z_mean']:+6.2f}  {check['p_value']:7.3g}  {verdict}")
+        return "\n".join(lines)
+
+
+def commissioning_prior(
+    posterior: xr.DataTree, unit: Unit, drift: float, seed: int
+) -> tuple[Prior, float]:
+    """The prior of a later record from a commissioning posterior: its nuisance parameters as
+    they were (a Gaussian mixture, each draw moved by ``drift`` × the range), the charge
+    uniform on its bounds (a leak may have moved it anywhere); and the commissioned charge."""
+    from pymc_vcc.inference.priors import GMMPrior
+
+    names = [str(n) for n in posterior["posterior"].data_vars if n in unit.parameters.ids]
+    if CHARGE not in names:
+        raise ValueError(f"the commissioning posterior has no {CHARGE}; it has {names}")
+    samples = np.column_stack([posterior["posterior"][n].values.ravel() for n in names])
+    commissioned = float(samples[:, names.index(CHARGE)].mean())
+    rng = np.random.default_rng(seed)
+    spec = unit.parameters[CHARGE]
+    samples[:, names.index(CHARGE)] = rng.uniform(spec.low, spec.high, len(samples))
+    box = box_prior(unit, names)
+    nuisance_drift = {name: (0.0 if name == CHARGE else drift) for name in names}
+    prior = GMMPrior.fit(
+        dict(zip(names, samples.T, strict=True)), box, seed=seed, drift=nuisance_drift
+    )
+    return prior, commissioned
+
+
+def record_study(
+    settings,
+    log: str,
+    *,
+    column_map: str | None = None,
+    unit: Unit | None = None,
+    commissioning: str | None = None,
+    drift: float = 0.03,
+    alarm_fraction: float = 0.9,
+) -> RecordResult:
+    """Calibrate a unit's log (``pymc-vcc calibrate``), or identify its charge against a
+    commissioning result (``pymc-vcc leak LOG --prior``): load and check the log before any
+    simulation, calibrate, and write the posterior, its mixture prior for later records, the
+    predictive check and a figure into ``settings.out``.
+
+    Args:
+        settings: where and how it runs (:class:`~pymc_vcc.studies.StudySettings`; budget
+            ``smoke``, ``small`` or ``paper``, see :data:`RECORD_BUDGETS`).
+        log: the CSV log.
+        column_map: its column map (TOML; default: ``LOG.columns.toml`` beside it).
+        unit: the unit description (default: the built-in split unit).
+        commissioning: a folder (or ``posterior.nc``) written by a calibration of the healthy
+            unit; then the leak check against it.
+        drift: sd of each nuisance parameter's change since commissioning, a fraction of its
+            range.
+        alarm_fraction: the alarm's threshold, a fraction of the commissioned charge.
+    """
+    from pymc_vcc.io.measurements import load_log
+    from pymc_vcc.plots import plot_charge_posteriors, save_figure
+    from pymc_vcc.studies.common import write_json, write_netcdf, write_text
+
+    started = time.perf_counter()
+    if not 0.0 < alarm_fraction < 1.0:
+        raise ValueError(f"alarm fraction must lie in (0, 1), got {alarm_fraction}")
+    if not 0.0 <= drift <= 1.0:
+        raise ValueError(f"drift must lie in [0, 1] (a fraction of each range), got {drift}")
+    budget = settings.budget if isinstance(settings.budget, str) else "small"
+    if budget not in RECORD_BUDGETS:
+        raise ValueError(f"budget {budget!r}: a record's calibration takes {list(RECORD_BUDGETS)}")
+    unit = settings.unit(unit)
+    measured = load_log(log, column_map, dt=unit.solver.output_interval)
+    prior, commissioned = None, None
+    if commissioning is not None:
+        path = Path(commissioning)
+        path = path / POSTERIOR_FILE if path.is_dir() else path
+        if not path.is_file():
+            raise FileNotFoundError(f"no commissioning posterior at {path}")
+        prior, commissioned = commissioning_prior(
+            xr.open_datatree(path, engine="h5netcdf"), unit, drift, settings.seed
+        )
+    draws, error_draws = RECORD_BUDGETS[budget]
+    with settings.claim_output("calibrate" if commissioning is None else "leak"):
+        with settings.open_executor() as executor:
+            tree = calibrate_record(
+                measured.observed,
+                measured.inputs,
+                executor,
+                unit=unit,
+                prior=prior,
+                draws=draws,
+                error_draws=error_draws,
+                seed=settings.seed,
+                solver=settings.solver or "cvode",
+            )
+        stats = tree["sample_stats"]
+        checks = {
+            str(name): {
+                key: float(stats[f"ppc_{key}"].sel(output=name))
+                for key in ("z_mean", "p_value", "misfit")
+            }
+            for name in stats["output"].values
+        }
+        alarm = None
+        if commissioned is not None:
+            draws_kg = tree["posterior"][CHARGE].values.ravel()
+            alarm = float(np.mean(draws_kg < alarm_fraction * commissioned))
+        result = RecordResult(
+            tree=tree,
+            charge=charge_summary(tree),
+            checks=checks,
+            n_simulations=int(stats["n_simulations"]),
+            wall_seconds=time.perf_counter() - started,
+            alarm=alarm,
+            commissioning_kg=commissioned,
+        )
+        if settings.out is not None:
+            from pymc_vcc.inference.priors import GMMPrior
+
+            out = settings.out
+            write_netcdf(tree, out / POSTERIOR_FILE)
+            names = [n for n in tree["posterior"].data_vars if n in unit.parameters.ids]
+            samples = {n: tree["posterior"][n].values.ravel() for n in names}
+            GMMPrior.fit(samples, box_prior(unit, names), seed=settings.seed).save(out / PRIOR_FILE)
+            write_json(out / "summary.json", result.summary())
+            write_text(out / "report.txt", result.format_table() + "\n")
+            figure = plot_charge_posteriors([tree], [commissioned or result.charge["mean_kg"]])
+            save_figure(figure, out / "charge")
+    return result

@@ -1,0 +1,52 @@
+"""Truth generators: each variant differs from the inference model the way it says."""
+
+import numpy as np
+import pytest
+
+from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.unit import load_unit
+from pymc_vcc.studies.truths import DRIFT, FINE_VOLUMES, VARIANTS, generate_truth
+
+CHARGE = 1.4
+
+
+@pytest.fixture(scope="module")
+def truths():
+    return {v: generate_truth(v, seed=7, charge=CHARGE) for v in VARIANTS}
+
+
+def test_each_variant_differs_as_it_says(truths):
+    model, unit = truths["model"], load_unit()
+    assert model.n_volumes == 10 and not model.lags and not model.biases
+    assert truths["fine"].n_volumes in FINE_VOLUMES
+    # a finer condenser holds its pressure differently: far beyond the noise (0.5 %)
+    pd_gap = abs(float(truths["fine"].observed["PD"].mean() - model.observed["PD"].mean()))
+    assert pd_gap > 5e3
+    assert all(5.0 <= tau <= 30.0 for tau in truths["lag"].lags.values())
+    assert abs(truths["bias"].biases["TD"]) <= 0.5
+    assert abs(truths["bias"].biases["PD"]) <= 0.01 * float(model.observed["PD"].max())
+    logged = truths["inputs"].inputs["T_ambient"].values - model.inputs["T_ambient"].values
+    assert 0 < np.abs(logged).max() <= 0.5 + 0.5 / 3
+    drifted = truths["drift"].parameters
+    for spec in unit.parameters:
+        if spec.id != "M0" and spec.low < spec.nominal * (1 - DRIFT):
+            assert abs(drifted[spec.id] / spec.nominal - 1) <= DRIFT + 1e-12
+    assert drifted != {spec.id: spec.nominal for spec in unit.parameters}
+    everything = truths["all"]
+    assert everything.lags and everything.biases and everything.n_volumes in FINE_VOLUMES
+    assert all(t.charge == CHARGE for t in truths.values())
+
+
+def test_a_record_starts_from_the_steady_state_at_its_first_inputs():
+    """Settled 600 s or 1200 s: the same first outputs (steady); unsettled: a start-up."""
+    runs = {
+        s: VCCSimulator(t_window=(0.0, 100.0), solver="cvode", settle=s)({"M0": 1.5})
+        for s in (0.0, 600.0, 1200.0)
+    }
+    for name, tol in (("TD", 0.05), ("PD", 2e3), ("TS", 0.05)):
+        first = {s: float(run[name].values[0]) for s, run in runs.items()}
+        assert first[600.0] == pytest.approx(first[1200.0], abs=tol)
+        assert abs(first[0.0] - first[600.0]) > 10 * tol
+    assert runs[600.0]["time"].values[0] == 0.0
+    with pytest.raises(ValueError, match="unknown truth variant"):
+        generate_truth("wet", seed=1)
