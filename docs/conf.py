@@ -93,12 +93,17 @@ def _attribute_docstring_as_written(self) -> list[str]:
 
 GoogleDocstring._parse_attribute_docstring = _attribute_docstring_as_written
 
-_documented: set[str] = set()
 _NOTHING = object()
 
 
 def _record(app, what, name, obj, options, lines) -> None:
-    _documented.add(name)
+    """Note the entry, per page: an incremental build reads only the pages that changed."""
+    documented = app.env.__dict__.setdefault("pymc_vcc_documented", {})
+    documented.setdefault(app.env.docname, set()).add(name)
+
+
+def _forget(app, env, docname) -> None:
+    env.__dict__.setdefault("pymc_vcc_documented", {}).pop(docname, None)
 
 
 def _resolve(dotted: str) -> object:
@@ -165,13 +170,16 @@ def _missing_reference(app, env, node, contnode):
 def _check_public_api(app, env) -> None:
     """Warn for every public name without an API entry, a docstring or a parameter description."""
     log = logging.getLogger("pymc_vcc.apicheck")
-    entries = {dotted.rpartition(".")[2]: dotted for dotted in _documented}
+    documented = env.__dict__.get("pymc_vcc_documented", {})
+    entries: dict[str, list[str]] = {}
+    for names in documented.values():
+        for dotted in names:
+            entries.setdefault(dotted.rpartition(".")[2], []).append(dotted)
     for name in pymc_vcc.__all__:
         if name == "__version__":
             continue
         obj = getattr(pymc_vcc, name)
-        dotted = entries.get(name)
-        if dotted is None or _resolve(dotted) is not obj:
+        if not any(_resolve(dotted) is obj for dotted in entries.get(name, [])):
             log.warning("public name %s has no entry in the API reference", name)
         for problem in _apicheck.problems(name, obj):
             log.warning("public API: %s", problem)
@@ -189,6 +197,7 @@ def _images_inside_the_build(app) -> None:
 def setup(app):
     app.connect("builder-inited", _images_inside_the_build, priority=900)
     app.connect("autodoc-process-docstring", _record)
+    app.connect("env-purge-doc", _forget)
     app.connect("env-check-consistency", _check_public_api)
     app.connect("missing-reference", _missing_reference)
     return {"parallel_read_safe": False}

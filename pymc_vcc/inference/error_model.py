@@ -154,7 +154,8 @@ class ErrorBudget:
         observed: the observed summaries.
         mean: systematic unit − model offset of each summary (subtracted from the data).
         parts: the covariance's parts by name (``noise``, ``bias``, ``model``).
-        n_draws: approximation-error draws that succeeded; ``n_failed`` those that did not.
+        n_draws: approximation-error draws that succeeded.
+        n_failed: approximation-error draws that failed.
     """
 
     outputs: tuple[str, ...]

@@ -745,6 +745,13 @@ class ColumnMap:
     Written as TOML: ``time_column = "..."`` (optionally ``time_unit``, ``time_format``), a
     ``[columns]`` table (file column = id) and an optional ``[units]`` table (file column =
     unit).
+
+    Attributes:
+        columns: file column -> input or output id (as ``load_measurements``'s ``columns``).
+        units: file column -> unit, for columns whose header and units row give none.
+        time_column: the file column of the timestamps.
+        time_unit: unit of numeric timestamps (s, ms, min, h).
+        time_format: ``strftime`` format of date-times (default: inferred).
     """
 
     columns: dict[str, str]
@@ -755,7 +762,11 @@ class ColumnMap:
 
 
 def load_column_map(path: str | Path) -> ColumnMap:
-    """Read a column map (TOML, see :class:`ColumnMap`); errors name the file and the key."""
+    """Read a column map (TOML, see :class:`ColumnMap`); errors name the file and the key.
+
+    Args:
+        path: the TOML file.
+    """
     import tomllib
 
     path = Path(path)
@@ -797,7 +808,13 @@ def load_log(
     path: str | Path, column_map: str | Path | ColumnMap | None = None, **options
 ) -> Measurements:
     """:func:`load_measurements` with a column map (default: the one beside the log);
-    ``options`` as for :func:`load_measurements`."""
+    ``options`` as for :func:`load_measurements`.
+
+    Args:
+        path: the CSV log.
+        column_map: a :class:`ColumnMap` or its TOML file (default: ``LOG.columns.toml``
+            beside the log).
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"log {path} does not exist")

@@ -238,6 +238,7 @@ def calibrate_record(
         error_draws: draws of the model-error statistics.
         seed: seeds every random draw.
         solver: ODE solver.
+        progressbar: show PyMC's progress bar.
 
     Returns:
         The ArviZ DataTree; ``sample_stats`` also holds the predictive check per output
