@@ -128,6 +128,7 @@ def generate_truth(
     charge: float | None = None,
     t_end: float = 1060.0,
     parameters: Mapping[str, float] | None = None,
+    n_volumes: int | None = None,
     solver: str = "cvode",
 ) -> Truth:
     """Draw a true unit of ``variant`` and the record its logger would write.
@@ -141,6 +142,7 @@ def generate_truth(
         t_end: length of the record, s.
         parameters: non-charge parameters of the true unit (default: nominal, or drifted for
             ``drift`` and ``all``); overrides the drift where given.
+        n_volumes: volumes per coil of the true unit (default: the variant's draw).
         solver: ODE solver of the truth's simulation.
 
     Raises:
@@ -156,9 +158,8 @@ def generate_truth(
     truth_params = drifted_parameters(unit, rng) if every or variant == "drift" else {}
     truth_params |= dict(parameters or {})
     truth_params["M0"] = charge
-    n_volumes = unit.discretisation.n_volumes
-    if every or variant == "fine":
-        n_volumes = int(rng.choice(FINE_VOLUMES))
+    drawn = int(rng.choice(FINE_VOLUMES)) if every or variant == "fine" else None
+    n_volumes = n_volumes or drawn or unit.discretisation.n_volumes
     true_unit = unit.with_changes(discretisation={"n_volumes": n_volumes})
     true_inputs = window(builtin_inputs() if inputs is None else inputs, t_end)
     simulator = VCCSimulator(true_unit, true_inputs, solver=solver, settle=SETTLE)

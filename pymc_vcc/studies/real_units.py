@@ -1,0 +1,191 @@
+"""The real-units benchmark: charge identification on data the inference model did not make.
+
+For each truth variant (:mod:`pymc_vcc.studies.truths`) and each of ``n_datasets`` seeds, a
+unit is drawn, its record generated, and the charge calibrated with
+:func:`~pymc_vcc.studies.unit_log.calibrate_record` (the charge among the nuisance parameters,
+under the error budget, uniform prior on the unit's box). Reported per variant: the mean
+absolute error of the posterior mean, the median width of the 95 % interval, the fraction of
+intervals covering the true charge, simulations and wall time per dataset, and the outputs the
+predictive check flagged.
+
+With ``alarm`` each unit is also recorded twice more, unchanged and with 20 % of its charge lost
+(same unit, other noise), and each later record is calibrated with the commissioning posterior
+as prior (:func:`~pymc_vcc.studies.unit_log.commissioning_prior`): the leak alarm's false-alarm
+rate on unchanged units and its detection rate at a 20 % loss.
+
+Each finished dataset is appended to ``<out>/checkpoints/validate-real-units.jsonl`` as it
+completes; ``resume`` skips the datasets already there.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
+from pymc_vcc.studies.truths import VARIANTS, generate_truth
+from pymc_vcc.studies.unit_log import (
+    CHARGE,
+    RECORD_BUDGETS,
+    calibrate_record,
+    charge_summary,
+    commissioning_prior,
+)
+
+LOSS = 0.2  # the leak the alarm must detect, a fraction of the commissioned charge
+ALARM_FRACTION = 0.9  # the alarm: P(charge < 0.9 × commissioned)
+ALARM_PROBABILITY = 0.5  # the alarm sounds above this posterior probability
+RUNS_CHECKPOINT = "validate-real-units"  # <out>/checkpoints/validate-real-units.jsonl
+
+
+@dataclass
+class RealUnitsResult:
+    """The benchmark's rows (one per dataset) and its table (one per variant)."""
+
+    runs: list[dict]
+    table: list[dict] = field(default_factory=list)
+    wall_seconds: float = 0.0
+
+    def summary(self) -> dict:
+        """The JSON summary."""
+        return {"table": self.table, "wall_seconds": round(self.wall_seconds, 1)}
+
+    def format_table(self) -> str:
+        """The table as printed by ``pymc-vcc validate --truth``."""
+        lines = [
+            "variant  datasets  MAE (kg)  median 95% width (kg)  coverage  sims/dataset  "
+            "s/dataset  false alarms  detection"
+        ]
+        for row in self.table:
+            alarms = (
+                f"{row['false_alarm_rate']:.2f}  {row['detection_rate']:.2f}"
+                if "false_alarm_rate" in row
+                else "-  -"
+            )
+            lines.append(
+                f"{row['variant']:<8} {row['datasets']:>8}  {row['mae_kg']:8.3f}  "
+                f"{row['median_width_kg']:21.3f}  {row['coverage']:8.2f}  "
+                f"{row['simulations']:12.0f}  {row['seconds']:9.0f}  {alarms}"
+            )
+        return "\n".join(lines)
+
+
+def _calibrated(truth, executor, settings: StudySettings, draws, error_draws, prior=None):
+    started = time.perf_counter()
+    tree = calibrate_record(
+        truth.observed,
+        truth.inputs,
+        executor,
+        prior=prior,
+        draws=draws,
+        error_draws=error_draws,
+        seed=settings.seed,
+        solver=settings.solver or "cvode",
+    )
+    stats = tree["sample_stats"]
+    misfit = [str(o) for o in stats["output"].values if float(stats["ppc_misfit"].sel(output=o))]
+    return tree, {
+        **charge_summary(tree),
+        "simulations": int(stats["n_simulations"]),
+        "seconds": time.perf_counter() - started,
+        "misfit": misfit,
+    }
+
+
+def _dataset(variant, seed, executor, settings, draws, error_draws, alarm, unit) -> dict:
+    truth = generate_truth(variant, seed)
+    tree, row = _calibrated(truth, executor, settings, draws, error_draws)
+    row |= {"variant": variant, "seed": seed, "truth_kg": truth.charge}
+    row["covers"] = row["low_kg"] <= truth.charge <= row["high_kg"]
+    if not alarm:
+        return row
+    prior, commissioned = commissioning_prior(tree, unit, 0.03, seed)
+    for name, charge in (("unchanged", truth.charge), ("leaked", (1 - LOSS) * truth.charge)):
+        later = generate_truth(
+            variant,
+            seed + 10_000_000,
+            charge=charge,
+            parameters=truth.parameters,
+            n_volumes=truth.n_volumes,
+        )
+        later_tree, _ = _calibrated(later, executor, settings, draws, error_draws, prior)
+        draws_kg = later_tree["posterior"][CHARGE].values.ravel()
+        row[f"alarm_{name}"] = float(np.mean(draws_kg < ALARM_FRACTION * commissioned))
+    return row
+
+
+def _summarise(variant: str, rows: list[dict]) -> dict:
+    errors = [abs(r["mean_kg"] - r["truth_kg"]) for r in rows]
+    summary = {
+        "variant": variant,
+        "datasets": len(rows),
+        "mae_kg": statistics.fmean(errors),
+        "median_width_kg": statistics.median(r["high_kg"] - r["low_kg"] for r in rows),
+        "coverage": statistics.fmean(float(r["covers"]) for r in rows),
+        "simulations": statistics.fmean(r["simulations"] for r in rows),
+        "seconds": statistics.median(r["seconds"] for r in rows),
+        "misfit_datasets": sum(bool(r["misfit"]) for r in rows),
+    }
+    if all("alarm_unchanged" in r for r in rows):
+        summary["false_alarm_rate"] = statistics.fmean(
+            float(r["alarm_unchanged"] > ALARM_PROBABILITY) for r in rows
+        )
+        summary["detection_rate"] = statistics.fmean(
+            float(r["alarm_leaked"] > ALARM_PROBABILITY) for r in rows
+        )
+    return summary
+
+
+@holds_output_folder("validate")
+def real_units_benchmark(
+    settings: StudySettings,
+    variants: Sequence[str] = VARIANTS,
+    n_datasets: int = 20,
+    *,
+    alarm: bool = False,
+) -> RealUnitsResult:
+    """Run the benchmark (see the module docstring); ``settings.budget`` picks the particles
+    and model-error draws of each calibration (:data:`RECORD_BUDGETS`)."""
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        raise ValueError(f"unknown truth variant(s) {unknown}; allowed are {list(VARIANTS)}")
+    if n_datasets < 1:
+        raise ValueError(f"n_datasets must be at least 1, got {n_datasets}")
+    budget = settings.budget if isinstance(settings.budget, str) else "small"
+    if budget not in RECORD_BUDGETS:
+        raise ValueError(f"budget {budget!r}: the benchmark takes {list(RECORD_BUDGETS)}")
+    draws, error_draws = RECORD_BUDGETS[budget]
+    started = time.perf_counter()
+    log = settings.checkpoint(RUNS_CHECKPOINT, ".jsonl")  # removed first unless resuming
+    done: dict[tuple[str, int], dict] = {}
+    if log is not None and log.is_file():
+        for line in log.read_text().splitlines():
+            row = json.loads(line)
+            done[(row["variant"], row["seed"])] = row
+    unit = settings.unit()
+    runs = []
+    with settings.open_executor() as executor:
+        for variant in variants:
+            for k in range(n_datasets):
+                seed = settings.seed + 1000 * VARIANTS.index(variant) + k
+                row = done.get((variant, seed))
+                if row is None:
+                    row = _dataset(
+                        variant, seed, executor, settings, draws, error_draws, alarm, unit
+                    )
+                    if log is not None:
+                        with log.open("a") as stream:
+                            stream.write(json.dumps(row) + "\n")
+                runs.append(row)
+    result = RealUnitsResult(runs)
+    result.table = [_summarise(v, [r for r in runs if r["variant"] == v]) for v in variants]
+    result.wall_seconds = time.perf_counter() - started
+    if settings.out is not None:
+        write_json(settings.out / "summary.json", result.summary())
+        write_text(settings.out / "table.txt", result.format_table() + "\n")
+    return result

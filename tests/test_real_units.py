@@ -1,0 +1,48 @@
+"""The real-units benchmark: its command, its rows, resume, and its summary's arithmetic."""
+
+import json
+
+import pytest
+
+from pymc_vcc.cli import main
+from pymc_vcc.studies.real_units import _summarise
+
+
+@pytest.mark.slow
+def test_validate_truth_runs_the_benchmark_and_resumes(tmp_path, capsys):
+    out = tmp_path / "bench"
+    arguments = ["validate", "--truth", "lag", "--datasets", "1", "--budget", "smoke"]
+    assert main([*arguments, "--out", str(out)]) == 0
+    assert "coverage" in capsys.readouterr().out
+    (row,) = [
+        json.loads(line)
+        for line in (out / "checkpoints" / "validate-real-units.jsonl").read_text().splitlines()
+    ]
+    assert row["variant"] == "lag" and 1.0 <= row["truth_kg"] <= 2.1
+    assert row["low_kg"] <= row["mean_kg"] <= row["high_kg"]
+    assert row["covers"] == (row["low_kg"] <= row["truth_kg"] <= row["high_kg"])
+    assert main([*arguments, "--out", str(out), "--resume", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["table"][0]["datasets"] == 1
+    assert (
+        len((out / "checkpoints" / "validate-real-units.jsonl").read_text().splitlines()) == 1
+    )  # nothing run again
+    assert summary["table"][0]["mae_kg"] == pytest.approx(abs(row["mean_kg"] - row["truth_kg"]))
+
+
+def test_summary_counts_errors_widths_coverage_and_alarms():
+    rows = [
+        {"mean_kg": 1.0, "truth_kg": 1.1, "low_kg": 0.9, "high_kg": 1.2, "covers": True,
+         "simulations": 100, "seconds": 10.0, "misfit": [], "alarm_unchanged": 0.1,
+         "alarm_leaked": 0.9},
+        {"mean_kg": 2.0, "truth_kg": 1.7, "low_kg": 1.9, "high_kg": 2.2, "covers": False,
+         "simulations": 300, "seconds": 30.0, "misfit": ["TD"], "alarm_unchanged": 0.7,
+         "alarm_leaked": 0.4},
+    ]  # fmt: skip
+    summary = _summarise("all", rows)
+    assert summary["mae_kg"] == pytest.approx(0.2)
+    assert summary["median_width_kg"] == pytest.approx(0.3)
+    assert summary["coverage"] == 0.5 and summary["misfit_datasets"] == 1
+    assert summary["false_alarm_rate"] == 0.5 and summary["detection_rate"] == 0.5
+    without_alarms = [{k: v for k, v in r.items() if not k.startswith("alarm")} for r in rows]
+    assert "false_alarm_rate" not in _summarise("all", without_alarms)
