@@ -50,3 +50,22 @@ def test_a_record_starts_from_the_steady_state_at_its_first_inputs():
     assert runs[600.0]["time"].values[0] == 0.0
     with pytest.raises(ValueError, match="unknown truth variant"):
         generate_truth("wet", seed=1)
+
+
+@pytest.mark.slow
+def test_a_second_round_draws_the_model_error_at_the_first_posterior():
+    from pymc_vcc.execution.executors import make_executor
+    from pymc_vcc.studies.unit_log import calibrate_record
+
+    truth = generate_truth("fine", seed=3, charge=CHARGE, t_end=400.0)
+    with make_executor("processes", 2) as executor:
+        tree = calibrate_record(
+            truth.observed, truth.inputs, executor, draws=16, error_draws=12, rounds=2, seed=1
+        )
+        with pytest.raises(ValueError, match="rounds"):
+            calibrate_record(truth.observed, truth.inputs, executor, rounds=0)
+    stats = tree["sample_stats"]
+    assert int(stats["error_rounds"]) == 2 and int(stats["error_draws"]) >= 10
+    smc = int(stats["simulations"].sum())
+    assert int(stats["n_simulations"]) >= smc + 2 * 2 * 12  # both rounds' model-error pairs
+    assert 0.9 <= float(tree["posterior"]["M0"].mean()) <= 2.2

@@ -158,9 +158,12 @@ def error_budget(
     n_draws: int = ERROR_DRAWS,
     fine_volumes: int = FINE_VOLUMES,
     spread: float = FIXED_SPREAD,
+    thetas: np.ndarray | None = None,
 ) -> ErrorBudget:
     """The error budget of ``observed`` (outputs of ``model``, on its time grid) for a
-    calibration of ``prior``'s parameters (see the module docstring)."""
+    calibration of ``prior``'s parameters (see the module docstring); the inferred parameters
+    of the model-error draws are ``thetas`` (rows in ``prior.names`` order, e.g. an earlier
+    posterior's draws) or ``n_draws`` draws of the prior."""
     accuracy = SensorAccuracy() if accuracy is None else accuracy
     outputs = tuple(str(name) for name in observed.data_vars)
     times = observed["time"].values
@@ -169,7 +172,7 @@ def error_budget(
     observed_summaries = summarise(values, windows)
     units = [observed[name].attrs["units"] for name in outputs]
     fixed = fixed_spread(model.unit, prior.names, spread)
-    thetas = prior.sample(n_draws, rng)
+    thetas = prior.sample(n_draws, rng) if thetas is None else thetas
     draws = [
         {
             "theta": dict(zip(prior.names, map(float, row), strict=True)),
@@ -222,6 +225,7 @@ def calibrate_record(
     seed: int = 0,
     solver: str = "cvode",
     progressbar: bool = False,
+    rounds: int = 1,
 ) -> xr.DataTree:
     """The posterior of ``parameters`` given a record of a real unit.
 
@@ -238,15 +242,20 @@ def calibrate_record(
         error_draws: draws of the model-error statistics.
         seed: seeds every random draw.
         solver: ODE solver.
+        rounds: calibrations in turn, each after the first with the model error drawn at the
+            previous posterior's draws (local rather than over the whole prior).
         progressbar: show PyMC's progress bar.
 
     Returns:
         The ArviZ DataTree; ``sample_stats`` also holds the predictive check per output
-        (``ppc_z_mean``, ``ppc_p_value``, ``ppc_misfit``), the error budget's size
-        (``error_draws``, ``error_failed``) and every simulation's count (``n_simulations``).
+        (``ppc_z_mean``, ``ppc_p_value``, ``ppc_misfit``), the last error budget's size
+        (``error_draws``, ``error_failed``, ``error_rounds``) and every simulation's count
+        (``n_simulations``).
     """
     unit = load_unit() if unit is None else unit
     prior = box_prior(unit, parameters) if prior is None else prior
+    if rounds < 1:
+        raise ValueError(f"rounds must be at least 1, got {rounds}")
     rng = np.random.default_rng(seed)
     t_end = float(observed["time"].values[-1])
     model = VCCSimulator(
@@ -258,12 +267,27 @@ def calibrate_record(
         solver=solver,
         settle=SETTLE,
     )
-    budget = error_budget(
-        model, observed, prior, executor, rng, accuracy=accuracy, n_draws=error_draws
-    )
-    with pm.Model():
-        add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
-        tree = sample_smc_abc(draws, executor=executor, random_seed=seed, progressbar=progressbar)
+    thetas, smc = None, 0
+    for _ in range(rounds):
+        budget = error_budget(
+            model,
+            observed,
+            prior,
+            executor,
+            rng,
+            accuracy=accuracy,
+            n_draws=error_draws,
+            thetas=thetas,
+        )
+        with pm.Model():
+            add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
+            tree = sample_smc_abc(
+                draws, executor=executor, random_seed=seed, progressbar=progressbar
+            )
+        stats = tree["sample_stats"]
+        smc += int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
+        samples = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
+        thetas = samples[rng.choice(len(samples), error_draws)]
     check, n_check = _predictive_check(tree, model, budget, executor, rng)
     stats = tree["sample_stats"].to_dataset()
     coords = {"output": list(budget.outputs)}
@@ -273,8 +297,8 @@ def calibrate_record(
         )
     stats["error_draws"] = budget.n_draws
     stats["error_failed"] = budget.n_failed
-    smc = int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
-    stats["n_simulations"] = smc + 2 * error_draws + n_check
+    stats["error_rounds"] = rounds
+    stats["n_simulations"] = smc + 2 * error_draws * rounds + n_check
     tree["sample_stats"] = xr.DataTree(stats)
     misfit = [name for name in budget.outputs if check[name]["misfit"]]
     if misfit:
