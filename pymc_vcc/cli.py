@@ -71,6 +71,7 @@ def _record(args: argparse.Namespace) -> int:
         commissioning=getattr(args, "prior", None),
         drift=args.drift,
         alarm_fraction=args.alarm_fraction,
+        rounds=args.rounds,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations, "
@@ -164,7 +165,7 @@ def _validate(args: argparse.Namespace) -> int:
         from pymc_vcc.studies.real_units import real_units_benchmark
 
         benchmark = real_units_benchmark(
-            _settings(args), args.truth, args.datasets, alarm=args.alarm
+            _settings(args), args.truth, args.datasets, alarm=args.alarm, rounds=args.rounds
         )
         text = f"{benchmark.format_table()}\n\n{benchmark.wall_seconds:.0f} s"
         return _report(args, text, benchmark.summary())
@@ -346,8 +347,20 @@ def _add_shared_sampler_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_rounds_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--rounds",
+        type=_positive(int),
+        default=1,
+        help="calibrations in turn, each after the first with the model error drawn at the "
+        "previous posterior (local); 2 removed a 0.1 kg pull on a benchmark unit at about "
+        "twice the simulations (default 1)",
+    )
+
+
 def _add_record_options(parser: argparse.ArgumentParser) -> None:
     """Options of the commands that read a unit's own log."""
+    _add_rounds_option(parser)
     parser.add_argument(
         "--columns",
         metavar="TOML",
@@ -417,6 +430,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         "sensor lags and biases, logged inputs off, drifted parameters, all), each charge "
         "calibrated among the nuisance parameters under the error budget",
     )
+    _add_rounds_option(parser)
     parser.add_argument(
         "--alarm",
         action="store_true",

@@ -75,7 +75,8 @@ class RealUnitsResult:
         return "\n".join(lines)
 
 
-def _calibrated(truth, executor, settings: StudySettings, draws, error_draws, prior=None):
+def _calibrated(truth, executor, settings: StudySettings, budget, prior=None):
+    draws, error_draws, rounds = budget
     started = time.perf_counter()
     tree = calibrate_record(
         truth.observed,
@@ -84,6 +85,7 @@ def _calibrated(truth, executor, settings: StudySettings, draws, error_draws, pr
         prior=prior,
         draws=draws,
         error_draws=error_draws,
+        rounds=rounds,
         seed=settings.seed,
         solver=settings.solver or "cvode",
     )
@@ -97,9 +99,9 @@ def _calibrated(truth, executor, settings: StudySettings, draws, error_draws, pr
     }
 
 
-def _dataset(variant, seed, executor, settings, draws, error_draws, alarm, unit) -> dict:
+def _dataset(variant, seed, executor, settings, budget, alarm, unit) -> dict:
     truth = generate_truth(variant, seed)
-    tree, row = _calibrated(truth, executor, settings, draws, error_draws)
+    tree, row = _calibrated(truth, executor, settings, budget)
     row |= {"variant": variant, "seed": seed, "truth_kg": truth.charge}
     row["covers"] = row["low_kg"] <= truth.charge <= row["high_kg"]
     if not alarm:
@@ -113,7 +115,7 @@ def _dataset(variant, seed, executor, settings, draws, error_draws, alarm, unit)
             parameters=truth.parameters,
             n_volumes=truth.n_volumes,
         )
-        later_tree, _ = _calibrated(later, executor, settings, draws, error_draws, prior)
+        later_tree, _ = _calibrated(later, executor, settings, budget, prior)
         draws_kg = later_tree["posterior"][CHARGE].values.ravel()
         row[f"alarm_{name}"] = float(np.mean(draws_kg < ALARM_FRACTION * commissioned))
     return row
@@ -148,9 +150,11 @@ def real_units_benchmark(
     n_datasets: int = 20,
     *,
     alarm: bool = False,
+    rounds: int = 1,
 ) -> RealUnitsResult:
     """Run the benchmark (see the module docstring); ``settings.budget`` picks the particles
-    and model-error draws of each calibration (:data:`RECORD_BUDGETS`)."""
+    and model-error draws of each calibration (:data:`RECORD_BUDGETS`), ``rounds`` as for
+    :func:`~pymc_vcc.studies.unit_log.calibrate_record`."""
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         raise ValueError(f"unknown truth variant(s) {unknown}; allowed are {list(VARIANTS)}")
@@ -159,7 +163,7 @@ def real_units_benchmark(
     budget = settings.budget if isinstance(settings.budget, str) else "small"
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: the benchmark takes {list(RECORD_BUDGETS)}")
-    draws, error_draws = RECORD_BUDGETS[budget]
+    work = (*RECORD_BUDGETS[budget], rounds)
     started = time.perf_counter()
     log = settings.checkpoint(RUNS_CHECKPOINT, ".jsonl")  # removed first unless resuming
     done: dict[tuple[str, int], dict] = {}
@@ -175,9 +179,7 @@ def real_units_benchmark(
                 seed = settings.seed + 1000 * VARIANTS.index(variant) + k
                 row = done.get((variant, seed))
                 if row is None:
-                    row = _dataset(
-                        variant, seed, executor, settings, draws, error_draws, alarm, unit
-                    )
+                    row = _dataset(variant, seed, executor, settings, work, alarm, unit)
                     if log is not None:
                         with log.open("a") as stream:
                             stream.write(json.dumps(row) + "\n")

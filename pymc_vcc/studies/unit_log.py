@@ -444,6 +444,7 @@ def record_study(
     commissioning: str | None = None,
     drift: float = 0.03,
     alarm_fraction: float = 0.9,
+    rounds: int = 1,
 ) -> RecordResult:
     """Calibrate a unit's log (``pymc-vcc calibrate``), or identify its charge against a
     commissioning result (``pymc-vcc leak LOG --prior``): load and check the log before any
@@ -461,6 +462,7 @@ def record_study(
         drift: sd of each nuisance parameter's change since commissioning, a fraction of its
             range.
         alarm_fraction: the alarm's threshold, a fraction of the commissioned charge.
+        rounds: as for :func:`calibrate_record`.
     """
     from pymc_vcc.io.measurements import load_log
     from pymc_vcc.plots import plot_charge_posteriors, save_figure
@@ -498,6 +500,7 @@ def record_study(
                 error_draws=error_draws,
                 seed=settings.seed,
                 solver=settings.solver or "cvode",
+                rounds=rounds,
             )
         stats = tree["sample_stats"]
         checks = {
