@@ -32,6 +32,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import xarray as xr
+from numpy.typing import ArrayLike
 from scipy import stats
 from scipy.signal import lfilter
 from sklearn.covariance import LedoitWolf
@@ -83,6 +85,17 @@ class SensorAccuracy:
                 f"no sensor accuracy for outputs in {units!r}; known: {_KIND_OF_UNITS}"
             )
         return float(getattr(self, kind)), kind != "temperature"
+
+    def shift_inputs(self, inputs: xr.Dataset, errors: Mapping[str, ArrayLike]) -> xr.Dataset:
+        """``inputs`` with each named input off by its error (K, or a fraction of the reading
+        for relative inputs); an error is a number or one per profile row."""
+        shifted = inputs.copy()
+        for name, error in errors.items():
+            kind, _ = self.inputs[name]
+            values = np.asarray(inputs[name].values, dtype=float)
+            moved = values + error if kind == "absolute" else values * (1.0 + np.asarray(error))
+            shifted[name] = inputs[name].copy(data=moved)
+        return shifted
 
 
 def plateau_windows(

@@ -35,6 +35,7 @@ from pymc_vcc.studies.unit_log import (
     calibrate_record,
     charge_summary,
     commissioning_prior,
+    predictive_checks,
 )
 
 LOSS = 0.2  # the leak the alarm must detect, a fraction of the commissioned charge
@@ -89,13 +90,11 @@ def _calibrated(truth, executor, settings: StudySettings, budget, prior=None):
         seed=settings.seed,
         solver=settings.solver or "cvode",
     )
-    stats = tree["sample_stats"]
-    misfit = [str(o) for o in stats["output"].values if float(stats["ppc_misfit"].sel(output=o))]
     return tree, {
         **charge_summary(tree),
-        "simulations": int(stats["n_simulations"]),
+        "simulations": int(tree["sample_stats"]["n_simulations"]),
         "seconds": time.perf_counter() - started,
-        "misfit": misfit,
+        "misfit": [name for name, check in predictive_checks(tree).items() if check["misfit"]],
     }
 
 

@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import xarray as xr
-from scipy.signal import lfilter
 
+from pymc_vcc.inference.error_model import SensorAccuracy, lagged
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.physics.inputs import builtin_inputs, window
 from pymc_vcc.physics.simulate import VCCSimulator
@@ -43,17 +43,10 @@ FINE_VOLUMES = (20, 25, 30)  # volumes per coil of a finer unit
 LAG_RANGE = (5.0, 30.0)  # s, first-order sensor time constant
 DRIFT = 0.15  # largest relative change of a non-charge parameter
 SETTLE = 600.0  # s at the first inputs before the record starts
-SENSOR_ACCURACY = {"temperature": 0.5, "pressure": 0.01, "mass_flow": 0.02, "power": 0.02}
-"""Bound of a sensor's constant error: K for temperatures, a fraction of the reading else."""
-INPUT_ACCURACY = {
-    "T_ambient": ("absolute", 0.5),
-    "T_indoor": ("absolute", 0.5),
-    "compressor_speed": ("relative", 0.01),
-    "valve_opening": ("relative", 0.02),
-}
-"""Bound of an input's logging error (K or a fraction of the reading)."""
-
-_KIND_OF_UNITS = {"K": "temperature", "Pa": "pressure", "kg/s": "mass_flow", "W": "power"}
+ACCURACY = SensorAccuracy()
+"""Bounds of the sensors' constant errors and of the inputs' logging errors: the typical
+accuracy classes (±0.5 K, ±1 % of a pressure, ±2 % of a flow; inputs ±0.5 K, ±1 % speed,
+±2 % valve)."""
 
 
 @dataclass(frozen=True)
@@ -101,22 +94,12 @@ def drifted_parameters(
 def logged_inputs(inputs: xr.Dataset, rng: np.random.Generator) -> xr.Dataset:
     """The inputs as a logger reads them: a constant error per input within its accuracy, plus
     an error of a third of that per held step."""
-    logged = inputs.copy()
-    for name, (kind, bound) in INPUT_ACCURACY.items():
-        values = np.asarray(inputs[name].values, dtype=float)
-        error = _uniform(rng, bound) + rng.uniform(-bound / 3, bound / 3, values.size)
-        logged[name] = inputs[name].copy(
-            data=values + error if kind == "absolute" else values * (1.0 + error)
-        )
-    return logged
-
-
-def lagged(series: np.ndarray, tau: float, dt: float) -> np.ndarray:
-    """A first-order sensor of time constant ``tau`` (s) reading ``series`` sampled every
-    ``dt`` s, settled at the first value."""
-    a = np.exp(-dt / tau)
-    filtered, _ = lfilter([1.0 - a], [1.0, -a], series, zi=[a * series[0]])
-    return filtered
+    rows = inputs["time"].size
+    errors = {
+        name: _uniform(rng, bound) + rng.uniform(-bound / 3, bound / 3, rows)
+        for name, (_, bound) in ACCURACY.inputs.items()
+    }
+    return ACCURACY.shift_inputs(inputs, errors)
 
 
 def generate_truth(
@@ -177,11 +160,11 @@ def generate_truth(
         values = np.asarray(clean[name].values, dtype=float)
         if every or variant == "lag":
             lags[name] = float(rng.uniform(*LAG_RANGE))
-            values = lagged(values, lags[name], dt)
+            values = lagged(values[None, :], np.array([lags[name]]), dt)[0]
         if every or variant == "bias":
-            kind = _KIND_OF_UNITS[clean[name].attrs["units"]]
-            error = _uniform(rng, SENSOR_ACCURACY[kind])
-            biases[name] = error if kind == "temperature" else error * float(np.mean(values))
+            bound, relative = ACCURACY.bias_bound(clean[name].attrs["units"])
+            error = _uniform(rng, bound)
+            biases[name] = error * float(np.mean(values)) if relative else error
             values = values + biases[name]
         read[name] = clean[name].copy(data=values)
     observed = SensorNoise.typical().measure(read, rng)

@@ -63,6 +63,7 @@ FINE_VOLUMES = 20  # volumes per coil of the finer unit that stands for model-fo
 FIXED_SPREAD = 0.2  # the parameters held fixed are known to ±20 % of nominal
 ERROR_DRAWS = 96  # draws of the model-error statistics
 PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
+PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in sample_stats
 
 
 @dataclass(frozen=True)
@@ -75,15 +76,9 @@ class ErrorPair:
     accuracy: SensorAccuracy
 
     def __call__(self, draw: dict) -> tuple[np.ndarray, np.ndarray] | None:
-        true_inputs = self.model.inputs.copy()
-        for name, error in draw["input_errors"].items():
-            kind, _ = self.accuracy.inputs[name]
-            values = np.asarray(true_inputs[name].values, dtype=float)
-            shifted = values + error if kind == "absolute" else values * (1.0 + error)
-            true_inputs[name] = true_inputs[name].copy(data=shifted)
         unit = VCCSimulator(
             self.fine_unit,
-            true_inputs,
+            self.accuracy.shift_inputs(self.model.inputs, draw["input_errors"]),
             outputs=self.model.output_names,
             t_window=self.model.t_window,
             solver=self.model.solver,
@@ -291,7 +286,7 @@ def calibrate_record(
     check, n_check = _predictive_check(tree, model, budget, executor, rng)
     stats = tree["sample_stats"].to_dataset()
     coords = {"output": list(budget.outputs)}
-    for key in ("z_mean", "p_value", "misfit"):
+    for key in PPC_KEYS:
         stats[f"ppc_{key}"] = xr.DataArray(
             [check[name][key] for name in budget.outputs], dims="output", coords=coords
         )
@@ -333,6 +328,16 @@ def _predictive_check(
         if run.attrs["status"] == "ok"
     ]
     return predictive_check(budget, np.asarray(summaries)), len(thetas)
+
+
+def predictive_checks(tree: xr.DataTree) -> dict[str, dict[str, float]]:
+    """The predictive check per output that :func:`calibrate_record` stored in
+    ``sample_stats``: output -> ``z_mean``, ``p_value``, ``misfit`` (1.0 or 0.0)."""
+    stats = tree["sample_stats"]
+    return {
+        str(name): {key: float(stats[f"ppc_{key}"].sel(output=name)) for key in PPC_KEYS}
+        for name in stats["output"].values
+    }
 
 
 def charge_summary(tree: xr.DataTree, interval: float = 0.95) -> dict[str, float]:
@@ -503,13 +508,7 @@ def record_study(
                 rounds=rounds,
             )
         stats = tree["sample_stats"]
-        checks = {
-            str(name): {
-                key: float(stats[f"ppc_{key}"].sel(output=name))
-                for key in ("z_mean", "p_value", "misfit")
-            }
-            for name in stats["output"].values
-        }
+        checks = predictive_checks(tree)
         alarm = None
         if commissioned is not None:
             draws_kg = tree["posterior"][CHARGE].values.ravel()
