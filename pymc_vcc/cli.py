@@ -84,9 +84,9 @@ def _record(args: argparse.Namespace) -> int:
 
 
 def _leak(args: argparse.Namespace) -> int:
-    if args.log is not None:
+    if getattr(args, "log", None) is not None:  # demo runs the leak study without a log
         return _record(args)
-    if args.prior is not None:
+    if getattr(args, "prior", None) is not None:
         raise ValueError("--prior (a commissioning result) needs a LOG to identify the charge on")
     from pymc_vcc.studies import leak_study
 

@@ -114,3 +114,9 @@ def test_box_sweep_reports_throughput_per_cpu_second():
     draws = load_unit().parameters.sample_uniform(2, np.random.default_rng(1))
     figures = _sweep("cvode", draws, workers=1)
     assert 0 < figures["sims_per_second"] <= figures["sims_per_cpu_second"] < 1e3
+
+
+def test_demo_parses_into_the_leak_study_without_a_log():
+    """The demo reuses the leak handler, whose log and prior options it does not have."""
+    args = build_parser().parse_args(["demo", "--out", "x"])
+    assert getattr(args, "log", None) is None and getattr(args, "prior", None) is None
