@@ -116,7 +116,18 @@ def test_box_sweep_reports_throughput_per_cpu_second():
     assert 0 < figures["sims_per_second"] <= figures["sims_per_cpu_second"] < 1e3
 
 
-def test_demo_parses_into_the_leak_study_without_a_log():
-    """The demo reuses the leak handler, whose log and prior options it does not have."""
+def test_the_demo_reaches_the_leak_study_without_a_log(monkeypatch):
+    """The demo reuses the leak handler, whose LOG and --prior it does not have."""
+    import pymc_vcc.cli as cli
+    import pymc_vcc.studies as studies
+
+    class Reached(Exception):
+        pass
+
+    def leak_study(*args, **kwargs):
+        raise Reached
+
+    monkeypatch.setattr(studies, "leak_study", leak_study)
     args = build_parser().parse_args(["demo", "--out", "x"])
-    assert getattr(args, "log", None) is None and getattr(args, "prior", None) is None
+    with pytest.raises(Reached):
+        cli._leak(args)
