@@ -1,5 +1,7 @@
 """Table III parameters: ids, validation of specs and of user parameter mappings."""
 
+from importlib.resources import files
+
 import numpy as np
 import pytest
 
@@ -29,6 +31,8 @@ def test_builtin_bounds_are_those_of_table_iii():
         ({"low": 1.0, "high": 1.0}, "low < high"),
         ({"nominal": 5.0}, "outside its bounds"),
         ({"nominal": float("nan")}, "finite"),
+        ({"tolerance": 0.0}, "tolerance must be a fraction"),
+        ({"tolerance": 1.5}, "tolerance must be a fraction"),
     ],
 )
 def test_bad_specs_are_clear_errors(changes, message):
@@ -75,3 +79,16 @@ def test_uniform_draws_stay_in_the_box():
     values = np.array([[d[pid] for pid in PARAMETER_IDS] for d in draws])
     assert np.all(values >= table.lows) and np.all(values <= table.highs)
     assert values.std(axis=0).min() > 0
+
+
+def test_a_stated_tolerance_is_read_and_kept_by_changes(tmp_path):
+    unit = load_unit()
+    assert unit.parameters["L_COND"].tolerance == 0.01
+    assert unit.parameters["CF_LEV"].tolerance is None
+    finer = unit.with_changes(discretisation={"n_volumes": 20})
+    assert finer.parameters["L_LIQ"].tolerance == unit.parameters["L_LIQ"].tolerance
+    text = (files("pymc_vcc") / "data" / "split_3p5kw_r410a.toml").read_text()
+    bad = tmp_path / "unit.toml"
+    bad.write_text(text.replace("tolerance = 0.01", 'tolerance = "1 %"', 1))
+    with pytest.raises(ValueError, match=r"L_COND\] tolerance: expected a number"):
+        load_unit(bad)

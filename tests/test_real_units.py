@@ -5,7 +5,9 @@ import json
 import pytest
 
 from pymc_vcc.cli import main
+from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.real_units import _summarise
+from pymc_vcc.studies.unit_log import fixed_spread
 
 
 @pytest.mark.slow
@@ -46,3 +48,13 @@ def test_summary_counts_errors_widths_coverage_and_alarms():
     assert summary["false_alarm_rate"] == 0.5 and summary["detection_rate"] == 0.5
     without_alarms = [{k: v for k, v in r.items() if not k.startswith("alarm")} for r in rows]
     assert "false_alarm_rate" not in _summarise("all", without_alarms)
+
+
+def test_held_parameters_spread_by_their_stated_tolerance():
+    unit = load_unit()
+    spread = fixed_spread(unit, ("M0", "CF_LEV"), 0.2)
+    assert "M0" not in spread and "CF_LEV" not in spread
+    low, high = spread["L_COND"]  # from the drawings: ±1 %
+    assert (low, high) == pytest.approx((0.99 * 19.0, 1.01 * 19.0))
+    assert spread["HTC_CV"] == pytest.approx((0.8 * 800.0, 1.2 * 800.0))  # no tolerance stated
+    assert spread["L_LIQ"] == pytest.approx((19.0, 21.0))

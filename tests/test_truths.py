@@ -30,7 +30,11 @@ def test_each_variant_differs_as_it_says(truths):
     drifted = truths["drift"].parameters
     for spec in unit.parameters:
         if spec.id != "M0" and spec.low < spec.nominal * (1 - DRIFT):
-            assert abs(drifted[spec.id] / spec.nominal - 1) <= DRIFT + 1e-12
+            assert abs(drifted[spec.id] / spec.nominal - 1) <= (spec.tolerance or DRIFT) + 1e-12
+    lengths = [spec for spec in unit.parameters if spec.tolerance is not None]
+    assert lengths and all(  # a length does not drift: it is off within its stated tolerance
+        abs(drifted[spec.id] / spec.nominal - 1) <= spec.tolerance for spec in lengths
+    )
     assert drifted != {spec.id: spec.nominal for spec in unit.parameters}
     everything = truths["all"]
     assert everything.lags and everything.biases and everything.n_volumes in FINE_VOLUMES

@@ -66,6 +66,9 @@ class ParameterSpec:
         Physical bounds, in ``unit``.
     nominal
         Nominal value, in ``unit``, inside the bounds.
+    tolerance
+        How well the nominal value is known when the parameter is not calibrated, a fraction
+        of it (a coil length from the drawings: 0.01); None when only the bounds are known.
     """
 
     id: str
@@ -74,6 +77,7 @@ class ParameterSpec:
     low: float
     high: float
     nominal: float
+    tolerance: float | None = None
 
     def __post_init__(self) -> None:
         for field in ("low", "high", "nominal"):
@@ -88,6 +92,11 @@ class ParameterSpec:
             raise ValueError(
                 f"parameter {self.id}: nominal {self.nominal} lies outside its bounds "
                 f"[{self.low}, {self.high}]"
+            )
+        if self.tolerance is not None and not 0.0 < self.tolerance < 1.0:
+            raise ValueError(
+                f"parameter {self.id}: tolerance must be a fraction in (0, 1), "
+                f"got {self.tolerance!r}"
             )
 
 

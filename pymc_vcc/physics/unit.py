@@ -310,6 +310,9 @@ def _section(source: str, section: str, cls: type, raw: Any) -> Any:
     return cls(**values)
 
 
+_PARAMETER_KEYS = ["name", "unit", "bounds", "nominal"]
+
+
 def _parameters(source: str, raw: Any, expected: ParameterIds) -> ParameterTable:
     if not isinstance(raw, dict):
         raise ValueError(f"{source} [parameters]: expected one table per parameter id")
@@ -318,7 +321,12 @@ def _parameters(source: str, raw: Any, expected: ParameterIds) -> ParameterTable
         where = f"{source} [parameters.{pid}]"
         if not isinstance(entry, dict):
             raise ValueError(f"{where}: expected a table with name, unit, bounds, nominal")
-        _check_keys(where, entry, ["name", "unit", "bounds", "nominal"])
+        _check_keys(
+            where,
+            entry,
+            ["name", "unit", "bounds", "nominal", "tolerance"],
+            frozenset({"tolerance"}),
+        )
         bounds = entry["bounds"]
         if (
             not isinstance(bounds, list)
@@ -329,6 +337,11 @@ def _parameters(source: str, raw: Any, expected: ParameterIds) -> ParameterTable
         nominal = entry["nominal"]
         if isinstance(nominal, bool) or not isinstance(nominal, int | float):
             raise ValueError(f"{where} nominal: expected a number, got {nominal!r}")
+        tolerance = entry.get("tolerance")
+        if tolerance is not None and (
+            isinstance(tolerance, bool) or not isinstance(tolerance, int | float)
+        ):
+            raise ValueError(f"{where} tolerance: expected a number, got {tolerance!r}")
         try:
             specs.append(
                 ParameterSpec(
@@ -338,6 +351,7 @@ def _parameters(source: str, raw: Any, expected: ParameterIds) -> ParameterTable
                     low=float(bounds[0]),
                     high=float(bounds[1]),
                     nominal=float(nominal),
+                    tolerance=None if tolerance is None else float(tolerance),
                 )
             )
         except ValueError as error:
@@ -412,6 +426,7 @@ def unit_to_dict(unit: Unit) -> dict[str, Any]:
             "bounds": [spec.low, spec.high],
             "nominal": spec.nominal,
         }
+        | ({} if spec.tolerance is None else {"tolerance": spec.tolerance})
         for spec in unit.parameters
     }
     return data

@@ -13,7 +13,8 @@ read them and the inputs as they were measured.
 * ``inputs``: the logged inputs off the true ones (ambient and indoor ±0.5 K, speed ±1 %,
   valve ±2 % of the reading, each a constant per record plus noise per input step);
 * ``drift``: every parameter but the charge moved by up to ±15 % from nominal (fouling,
-  airflow, valve wear), inside the unit's bounds;
+  airflow, valve and compressor wear), inside the unit's bounds; the lengths, which do not
+  drift, off within the tolerance the unit states for them;
 * ``all``: all of the above at once.
 
 Every variant adds the typical white sensor noise of
@@ -81,12 +82,13 @@ def _uniform(rng: np.random.Generator, bound: float) -> float:
 def drifted_parameters(
     unit: Unit, rng: np.random.Generator, drift: float = DRIFT
 ) -> dict[str, float]:
-    """Every parameter but the charge at nominal × U(1 − drift, 1 + drift), inside its bounds."""
+    """Every parameter but the charge at nominal × U(1 − drift, 1 + drift), inside its bounds;
+    one the unit states a tolerance for (a length) does not drift: it is off within that."""
     moved = {}
     for spec in unit.parameters:
         if spec.id == "M0":
             continue
-        value = spec.nominal * (1.0 + _uniform(rng, drift))
+        value = spec.nominal * (1.0 + _uniform(rng, spec.tolerance or drift))
         moved[spec.id] = float(np.clip(value, spec.low, spec.high))
     return moved
 

@@ -60,8 +60,11 @@ airflow, valve and compressor wear) or what was never known exactly."""
 
 SETTLE = 600.0  # s at the record's first inputs before it starts
 FINE_VOLUMES = 20  # volumes per coil of the finer unit that stands for model-form error
-FIXED_SPREAD = 0.2  # the parameters held fixed are known to ±20 % of nominal
+FIXED_SPREAD = 0.2  # a parameter held fixed is known to ±20 % of nominal unless the unit says
 ERROR_DRAWS = 96  # draws of the model-error statistics
+SCOUTING_SHARE = 0.5  # particles and model-error draws of a round before the last
+MIN_PARTICLES = 16  # fewest SMC particles of a round
+MIN_ERROR_DRAWS = 12  # fewest model-error draws of a round (the covariance needs 10)
 PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
 PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in sample_stats
 
@@ -130,14 +133,15 @@ def plateau_edges(inputs: xr.Dataset) -> np.ndarray:
 def fixed_spread(
     unit: Unit, inferred: Sequence[str], spread: float
 ) -> dict[str, tuple[float, float]]:
-    """The range of each parameter the calibration holds at nominal: ±``spread`` × nominal,
-    inside the unit's bounds."""
+    """The range of each parameter the calibration holds at nominal: ± its tolerance (or
+    ``spread`` when the unit states none) × nominal, inside the unit's bounds."""
     table = {}
     for spec in unit.parameters:
         if spec.id in inferred:
             continue
-        low = max(spec.low, spec.nominal * (1.0 - spread))
-        high = min(spec.high, spec.nominal * (1.0 + spread))
+        known_to = spread if spec.tolerance is None else spec.tolerance
+        low = max(spec.low, spec.nominal * (1.0 - known_to))
+        high = min(spec.high, spec.nominal * (1.0 + known_to))
         table[spec.id] = (low, high)
     return table
 
@@ -238,7 +242,8 @@ def calibrate_record(
         seed: seeds every random draw.
         solver: ODE solver.
         rounds: calibrations in turn, each after the first with the model error drawn at the
-            previous posterior's draws (local rather than over the whole prior).
+            previous posterior's draws (local rather than over the whole prior); the rounds
+            before the last scout with :data:`SCOUTING_SHARE` of the particles and draws.
         progressbar: show PyMC's progress bar.
 
     Returns:
@@ -262,8 +267,10 @@ def calibrate_record(
         solver=solver,
         settle=SETTLE,
     )
-    thetas, smc = None, 0
-    for _ in range(rounds):
+    thetas, simulations = None, 0
+    for last in [False] * (rounds - 1) + [True]:
+        share = 1.0 if last else SCOUTING_SHARE
+        n_error = max(MIN_ERROR_DRAWS, round(share * error_draws))
         budget = error_budget(
             model,
             observed,
@@ -271,18 +278,21 @@ def calibrate_record(
             executor,
             rng,
             accuracy=accuracy,
-            n_draws=error_draws,
-            thetas=thetas,
+            n_draws=n_error,
+            thetas=None if thetas is None else thetas[rng.choice(len(thetas), n_error)],
         )
         with pm.Model():
             add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
             tree = sample_smc_abc(
-                draws, executor=executor, random_seed=seed, progressbar=progressbar
+                max(MIN_PARTICLES, round(share * draws)),
+                executor=executor,
+                random_seed=seed,
+                progressbar=progressbar,
             )
         stats = tree["sample_stats"]
-        smc += int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
-        samples = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
-        thetas = samples[rng.choice(len(samples), error_draws)]
+        simulations += 2 * n_error
+        simulations += int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
+        thetas = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
     check, n_check = _predictive_check(tree, model, budget, executor, rng)
     stats = tree["sample_stats"].to_dataset()
     coords = {"output": list(budget.outputs)}
@@ -293,7 +303,7 @@ def calibrate_record(
     stats["error_draws"] = budget.n_draws
     stats["error_failed"] = budget.n_failed
     stats["error_rounds"] = rounds
-    stats["n_simulations"] = smc + 2 * error_draws * rounds + n_check
+    stats["n_simulations"] = simulations + n_check
     tree["sample_stats"] = xr.DataTree(stats)
     misfit = [name for name in budget.outputs if check[name]["misfit"]]
     if misfit:
