@@ -210,6 +210,7 @@ def _identify(args: argparse.Namespace) -> int:
         at=dict(args.at or []),
         t_end=args.t_end,
         step=args.step,
+        fit=args.fit or (),
     )
     text = (
         f"{result.format_table()}\n\n{result.identifiability.simulations} simulations, "
@@ -615,6 +616,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive(float),
         default=0.1,
         help="central-difference half-step, in prior sds (default 0.1)",
+    )
+    identify.add_argument(
+        "--fit",
+        nargs="+",
+        metavar="ID",
+        help="also show how far a calibration of these parameters is pulled by each of the "
+        "others being off (e.g. --fit M0 CF_VOL ...: which held parameters confound the charge)",
     )
     identify.set_defaults(handler=_identify)
 

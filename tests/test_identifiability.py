@@ -10,6 +10,7 @@ import xarray as xr
 from pymc_vcc.inference.identifiability import identifiability
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.studies.identify import IdentifyResult
 
 N_TIME = 120
 PLACE = np.linspace(0.0, 1.0, N_TIME)
@@ -94,6 +95,22 @@ def test_directions_name_the_product_and_the_inert_parameter():
     assert "2 of 4 directions not identified" in str(found)
 
 
+def test_confounding_is_the_fitted_shift_a_held_parameter_causes():
+    found = identifiability(Product(), SensorNoise(temperature=0.2), at=AT, executor="serial")
+    table = found.confounding(["a", "c"])
+    assert list(table.index) == ["b", "d"] and list(table.columns) == ["a", "c"]
+    # a·b is what T1 sees: a true b one prior sd above the held value reads as a higher a
+    expected = AT["a"] / AT["b"] * PRIOR_SD["b"]
+    assert table.loc["b", "a"] == pytest.approx(expected, rel=1e-3)
+    assert table.loc["b", "c"] == pytest.approx(0.0, abs=1e-9)
+    assert table.loc["d"].abs().max() == pytest.approx(0.0, abs=1e-9)
+    with pytest.raises(ValueError, match="were not examined"):
+        found.confounding(["e"])
+    printed = IdentifyResult(found, 1.0, 0.0, fit=("a", "c")).format_table()
+    assert "Fitting a, c: the shift of each estimate" in printed
+    assert printed.splitlines()[-2].split()[0] == "b"  # the largest pull on a first
+
+
 def test_a_failed_perturbation_is_reported_not_raised():
     found = identifiability(
         Product(fail_above=0.52), SensorNoise(temperature=0.2), at=AT, executor="serial"
@@ -173,6 +190,7 @@ def test_identify_command_writes_the_table_and_names_the_unidentified(tmp_path, 
             "--parameters", "M0", "CF_POW", "CF_PREF", "FI_SPEED",
             "--at", "M0=1.4", "FO_FLOW=0.5",
             "--t-end", "200",
+            "--fit", "M0", "CF_POW",
             "--executor", "serial",
             "--solver", "cvode",
             "--out", str(tmp_path),
@@ -181,11 +199,23 @@ def test_identify_command_writes_the_table_and_names_the_unidentified(tmp_path, 
     )  # fmt: skip
     assert code == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    pull = summary["confounding"]
+    assert list(pull) == ["CF_PREF", "FI_SPEED"] or list(pull) == ["FI_SPEED", "CF_PREF"]
+    assert pull["FI_SPEED"] == {"M0": 0.0, "CF_POW": 0.0}  # an inert fan speed pulls nothing
+    # only the loss heat CF_POW·φ(CF_PREF) is seen: more of it through CF_PREF reads as CF_POW
+    assert pull["CF_PREF"]["CF_POW"] > 0.05
     assert summary["at"]["M0"] == 1.4 and summary["n_simulations"] == 9
     assert summary["sd_ratio"]["FI_SPEED"] == 1.0 and summary["sd_ratio"]["M0"] < 0.01
     assert len(summary["not_identified"]) == 2
     table = (tmp_path / "identifiability.csv").read_text().splitlines()
     assert table[0] == ",at,prior_sd,sd_ratio,conditional_sd_ratio" and len(table) == 5
+
+
+def test_identify_refuses_to_fit_a_parameter_it_does_not_examine():
+    from pymc_vcc.studies import identify_study
+
+    with pytest.raises(ValueError, match=r"fitted parameter\(s\) \['CF_LEV'\] are not among"):
+        identify_study(parameters=["M0", "CF_VOL"], fit=["CF_LEV"])
 
 
 def test_identify_command_refuses_a_bad_point(capsys):

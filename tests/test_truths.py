@@ -71,5 +71,5 @@ def test_a_second_round_draws_the_model_error_at_the_first_posterior():
     stats = tree["sample_stats"]
     assert int(stats["error_rounds"]) == 2 and int(stats["error_draws"]) >= 10
     smc = int(stats["simulations"].sum())
-    assert int(stats["n_simulations"]) >= smc + 2 * 2 * 12  # both rounds' model-error pairs
+    assert int(stats["n_simulations"]) >= smc + 2 * 3 * 12  # both rounds' model-error draws
     assert 0.9 <= float(tree["posterior"]["M0"].mean()) <= 2.2

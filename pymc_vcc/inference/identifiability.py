@@ -130,6 +130,26 @@ class Identifiability:
         """The directions whose expected sd ratio exceeds ``threshold``."""
         return [d for d in self.directions() if d.sd_ratio > threshold]
 
+    def confounding(self, fitted: Sequence[str]) -> pd.DataFrame:
+        """How far a calibration of ``fitted`` is misled by each parameter it holds fixed when
+        that one is off: the shift of each fitted parameter's estimate (its SI units; columns)
+        when the held parameter's true value is 1 prior sd above the value held (rows), by the
+        data's least squares near the point, ``F_ff⁻¹ F_fh``. A large entry names a held
+        parameter the fitted one cannot be told from: know it better, or fit it too."""
+        unknown = [name for name in fitted if name not in self.parameters]
+        if unknown:
+            raise ValueError(f"fitted parameter(s) {unknown} were not examined: {self.parameters}")
+        broken = [name for name in self.parameters if name in self.failed]
+        if broken:
+            raise ValueError(f"the perturbed simulations of {broken} failed: no confounding")
+        index = {name: k for k, name in enumerate(self.parameters)}
+        held = [name for name in self.parameters if name not in fitted]
+        f = [index[name] for name in fitted]
+        h = [index[name] for name in held]
+        shift = np.linalg.solve(self.information[np.ix_(f, f)], self.information[np.ix_(f, h)])
+        scale = np.array([self.prior_sd[name] for name in fitted])
+        return pd.DataFrame((shift * scale[:, None]).T, index=held, columns=list(fitted))
+
     def to_dataframe(self) -> pd.DataFrame:
         """One row per parameter: the point, its prior sd, the expected sd ratios."""
         return pd.DataFrame(

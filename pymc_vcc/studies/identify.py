@@ -14,6 +14,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+import pandas as pd
 import xarray as xr
 
 from pymc_vcc.inference.identifiability import Identifiability, identifiability
@@ -30,7 +31,18 @@ class IdentifyResult:
     identifiability: Identifiability
     t_end: float
     wall_seconds: float
+    fit: tuple[str, ...] = ()
     files: list[str] = field(default_factory=list)
+
+    @property
+    def confounding(self) -> pd.DataFrame | None:
+        """With ``fit``: each held parameter's pull on the fitted ones (see
+        :meth:`~pymc_vcc.inference.identifiability.Identifiability.confounding`), the
+        largest pull on the first fitted parameter first."""
+        if not self.fit:
+            return None
+        table = self.identifiability.confounding(self.fit)
+        return table.reindex(table[self.fit[0]].abs().sort_values(ascending=False).index)
 
     def summary(self) -> dict:
         """The JSON summary: the point, expected sd ratios, unidentified directions, counts."""
@@ -43,13 +55,22 @@ class IdentifyResult:
             "conditional_sd_ratio": found.conditional_sd_ratio,
             "not_identified": [d.summary() for d in found.not_identified()],
             "failed": found.failed,
+            "confounding": None if self.confounding is None else self.confounding.to_dict("index"),
             "n_simulations": found.simulations,
             "wall_seconds": round(self.wall_seconds, 2),
         }
 
     def format_table(self) -> str:
-        """The per-parameter table and the unidentified directions, as printed."""
-        return str(self.identifiability)
+        """The per-parameter table and the unidentified directions (and, with ``fit``, the
+        held parameters' pull on the fitted ones), as printed."""
+        text = str(self.identifiability)
+        if self.confounding is not None:
+            pull = self.confounding.to_string(float_format=lambda x: f"{x:.3g}")
+            text += (
+                f"\n\nFitting {', '.join(self.fit)}: the shift of each estimate when a held "
+                "parameter's true value is 1 prior sd above the value held (SI units)\n" + pull
+            )
+        return text
 
 
 @holds_output_folder("identify")
@@ -63,12 +84,17 @@ def identify_study(
     t_end: float = 1060.0,
     step: float = 0.1,
     sensor_noise: SensorNoise | None = None,
+    fit: Sequence[str] = (),
 ) -> IdentifyResult:
     """Local identifiability of ``parameters`` (default: all of the unit's) at ``at`` (default:
     nominal; SI units) from the first ``t_end`` s of ``inputs`` (default: the built-in
-    profile) under ``sensor_noise`` (default: typical)."""
+    profile) under ``sensor_noise`` (default: typical); with ``fit``, how far a calibration
+    of those is pulled by each of the others being off."""
     started = time.perf_counter()
     unit = settings.unit(unit)
+    examined = list(parameters) if parameters is not None else list(unit.parameters.ids)
+    if unexamined := [name for name in fit if name not in examined]:
+        raise ValueError(f"fitted parameter(s) {unexamined} are not among those examined")
     simulator = VCCSimulator(
         unit.with_tolerances(DIFFERENCING_TOLERANCE_SCALE),
         inputs,
@@ -85,7 +111,7 @@ def identify_study(
             executor=executor,
             time_limit=settings.time_limit,
         )
-    result = IdentifyResult(found, float(t_end), time.perf_counter() - started)
+    result = IdentifyResult(found, float(t_end), time.perf_counter() - started, tuple(fit))
     if settings.out is not None:
         out = settings.out
         write_json(out / "summary.json", result.summary())

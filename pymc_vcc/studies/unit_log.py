@@ -60,6 +60,11 @@ airflow, valve and compressor wear) or what was never known exactly."""
 
 SETTLE = 600.0  # s at the record's first inputs before it starts
 FINE_VOLUMES = 20  # volumes per coil of the finer unit that stands for model-form error
+CONTINUUM = 2.0
+"""Where a real unit's coils lie, in steps of the model → :data:`FINE_VOLUMES` difference: the
+coils converge to first order (the 10 → 20 difference is twice the 20 → 40 one for every output
+at 1.2 and 1.9 kg), so the continuum is 2 steps away. A unit is drawn uniformly between the
+model's own discretisation (0) and the continuum."""
 FIXED_SPREAD = 0.2  # a parameter held fixed is known to ±20 % of nominal unless the unit says
 ERROR_DRAWS = 96  # draws of the model-error statistics
 SCOUTING_SHARE = 0.5  # particles and model-error draws of a round before the last
@@ -71,7 +76,8 @@ PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in
 
 @dataclass(frozen=True)
 class ErrorPair:
-    """Picklable: the unit's and the model's series for one draw of what is not inferred."""
+    """Picklable: the unit's and the model's series for one draw of what is not inferred (the
+    unit is the model's coils moved ``fineness`` steps toward :data:`FINE_VOLUMES`; 3 runs)."""
 
     model: VCCSimulator
     fine_unit: Unit
@@ -79,23 +85,29 @@ class ErrorPair:
     accuracy: SensorAccuracy
 
     def __call__(self, draw: dict) -> tuple[np.ndarray, np.ndarray] | None:
-        unit = VCCSimulator(
-            self.fine_unit,
-            self.accuracy.shift_inputs(self.model.inputs, draw["input_errors"]),
-            outputs=self.model.output_names,
-            t_window=self.model.t_window,
-            solver=self.model.solver,
-            settle=self.model.settle,
-        )
-        runs = [unit({**draw["fixed"], **draw["theta"]}), self.model(draw["theta"])]
+        logged = self.accuracy.shift_inputs(self.model.inputs, draw["input_errors"])
+        units = [
+            VCCSimulator(
+                unit,
+                logged,
+                outputs=self.model.output_names,
+                t_window=self.model.t_window,
+                solver=self.model.solver,
+                settle=self.model.settle,
+            )
+            for unit in (self.fine_unit, self.model.unit)
+        ]
+        true_parameters = {**draw["fixed"], **draw["theta"]}
+        runs = [unit(true_parameters) for unit in units] + [self.model(draw["theta"])]
         if any(run.attrs["status"] != "ok" for run in runs):
             return None
-        rows = [
+        fine, coarse, model = (
             np.stack([run[name].sel(time=self.times).values for name in self.model.output_names])
             for run in runs
-        ]
+        )
+        unit = coarse + draw["fineness"] * (fine - coarse)
         dt = float(np.median(np.diff(self.times)))
-        return lagged(rows[0], draw["lags"], dt), rows[1]
+        return lagged(unit, draw["lags"], dt), model
 
 
 STEP_THRESHOLDS = {
@@ -181,6 +193,7 @@ def error_budget(
                 for name, (_, bound) in accuracy.inputs.items()
             },
             "lags": rng.uniform(0.0, accuracy.lag, len(outputs)),
+            "fineness": float(rng.uniform(0.0, CONTINUUM)),
         }
         for row in thetas
     ]
@@ -290,7 +303,7 @@ def calibrate_record(
                 progressbar=progressbar,
             )
         stats = tree["sample_stats"]
-        simulations += 2 * n_error
+        simulations += 3 * n_error
         simulations += int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
         thetas = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
     check, n_check = _predictive_check(tree, model, budget, executor, rng)
