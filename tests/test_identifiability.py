@@ -187,7 +187,7 @@ def test_identify_command_writes_the_table_and_names_the_unidentified(tmp_path, 
     code = main(
         [
             "identify",
-            "--parameters", "M0", "CF_POW", "CF_PREF", "FI_SPEED",
+            "--parameters", "M0", "CF_POW", "CF_PREF", "FI_SPEED", "L_LIQ",
             "--at", "M0=1.4", "FO_FLOW=0.5",
             "--t-end", "200",
             "--fit", "M0", "CF_POW",
@@ -200,15 +200,17 @@ def test_identify_command_writes_the_table_and_names_the_unidentified(tmp_path, 
     assert code == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     pull = summary["confounding"]
-    assert list(pull) == ["CF_PREF", "FI_SPEED"] or list(pull) == ["FI_SPEED", "CF_PREF"]
+    assert next(iter(pull)) == "L_LIQ"  # the liquid line's refrigerant reads as charge
+    assert pull["L_LIQ"]["M0"] < -0.005
     assert pull["FI_SPEED"] == {"M0": 0.0, "CF_POW": 0.0}  # an inert fan speed pulls nothing
     # only the loss heat CF_POW·φ(CF_PREF) is seen: more of it through CF_PREF reads as CF_POW
     assert pull["CF_PREF"]["CF_POW"] > 0.05
-    assert summary["at"]["M0"] == 1.4 and summary["n_simulations"] == 9
+    assert summary["at"]["M0"] == 1.4 and summary["n_simulations"] == 11
+    assert summary["prior_sd"]["L_LIQ"] == pytest.approx(0.05 * 20.0 / np.sqrt(3.0))  # ±5 %
     assert summary["sd_ratio"]["FI_SPEED"] == 1.0 and summary["sd_ratio"]["M0"] < 0.01
     assert len(summary["not_identified"]) == 2
     table = (tmp_path / "identifiability.csv").read_text().splitlines()
-    assert table[0] == ",at,prior_sd,sd_ratio,conditional_sd_ratio" and len(table) == 5
+    assert table[0] == ",at,prior_sd,sd_ratio,conditional_sd_ratio" and len(table) == 6
 
 
 def test_identify_refuses_to_fit_a_parameter_it_does_not_examine():

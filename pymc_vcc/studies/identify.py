@@ -14,6 +14,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
 import pandas as pd
 import xarray as xr
 
@@ -89,7 +90,9 @@ def identify_study(
     """Local identifiability of ``parameters`` (default: all of the unit's) at ``at`` (default:
     nominal; SI units) from the first ``t_end`` s of ``inputs`` (default: the built-in
     profile) under ``sensor_noise`` (default: typical); with ``fit``, how far a calibration
-    of those is pulled by each of the others being off."""
+    of those is pulled by each of the others being off. A parameter's prior is uniform within
+    its stated tolerance (:class:`~pymc_vcc.physics.parameters.ParameterSpec`), else on its
+    bounds."""
     started = time.perf_counter()
     unit = settings.unit(unit)
     examined = list(parameters) if parameters is not None else list(unit.parameters.ids)
@@ -102,11 +105,17 @@ def identify_study(
         parameters=parameters,
     )
     point = {spec.id: spec.nominal for spec in unit.parameters} | dict(at or {})
+    known = {  # uniform within the stated tolerance; the others uniform on their bounds
+        spec.id: spec.tolerance * spec.nominal / np.sqrt(3.0)
+        for spec in unit.parameters
+        if spec.tolerance is not None and spec.id in examined
+    }
     with settings.open_executor() as executor:
         found = identifiability(
             simulator,
             sensor_noise or SensorNoise.typical(),
             at=point,
+            prior_sd=known,
             step=step,
             executor=executor,
             time_limit=settings.time_limit,
