@@ -165,20 +165,22 @@ def real_units_benchmark(
     work = (*RECORD_BUDGETS[budget], rounds)
     started = time.perf_counter()
     log = settings.checkpoint(RUNS_CHECKPOINT, ".jsonl")  # removed first unless resuming
-    done: dict[tuple[str, int], dict] = {}
+    done: dict[tuple, dict] = {}  # rows of another budget, rounds or alarm are not reused
     if log is not None and log.is_file():
         for line in log.read_text().splitlines():
             row = json.loads(line)
-            done[(row["variant"], row["seed"])] = row
+            key = (row["variant"], row["seed"], tuple(row.get("work", ())), "alarm_leaked" in row)
+            done[key] = row
     unit = settings.unit()
     runs = []
     with settings.open_executor() as executor:
-        for variant in variants:
-            for k in range(n_datasets):
+        for k in range(n_datasets):  # dataset-major: an interrupted run covers every variant
+            for variant in variants:
                 seed = settings.seed + 1000 * VARIANTS.index(variant) + k
-                row = done.get((variant, seed))
+                row = done.get((variant, seed, work, alarm))
                 if row is None:
                     row = _dataset(variant, seed, executor, settings, work, alarm, unit)
+                    row["work"] = list(work)
                     if log is not None:
                         with log.open("a") as stream:
                             stream.write(json.dumps(row) + "\n")
