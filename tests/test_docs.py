@@ -6,7 +6,6 @@ import importlib
 import re
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import nbformat
@@ -26,7 +25,6 @@ PUBLIC = sorted(set(pymc_vcc.__all__) - {"__version__"})
 def test_the_site_builds_in_strict_mode(tmp_path):
     """What ``make docs`` runs: any warning (a broken link, a reference to nothing, a public
     name without docstring or API entry) fails it."""
-    started = time.perf_counter()
     build = subprocess.run(
         [
             sys.executable,
@@ -47,7 +45,6 @@ def test_the_site_builds_in_strict_mode(tmp_path):
         text=True,
         cwd=ROOT,
     )
-    seconds = time.perf_counter() - started
     assert build.returncode == 0, build.stderr[-5000:]
     assert "WARNING" not in build.stderr and "ERROR" not in build.stderr, build.stderr[-5000:]
     site = tmp_path / "site"
@@ -63,7 +60,6 @@ def test_the_site_builds_in_strict_mode(tmp_path):
     api = "".join(path.read_text() for path in (site / "api").glob("*.html"))
     entries = {_resolve(anchor) for anchor in re.findall(r'id="(pymc_vcc\.[\w.]+)"', api)}
     assert [name for name in PUBLIC if id(getattr(pymc_vcc, name)) not in entries] == []
-    assert seconds < 60, f"the docs build took {seconds:.0f} s"
 
 
 def _resolve(dotted: str) -> int:

@@ -32,7 +32,7 @@ class IdentifyResult:
     identifiability: Identifiability
     t_end: float
     wall_seconds: float
-    fit: tuple[str, ...] = ()
+    fit: Sequence[str] = ()
     files: list[str] = field(default_factory=list)
 
     @property
