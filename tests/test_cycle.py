@@ -133,7 +133,7 @@ def test_jacobian_matches_central_differences(setup):
 
 
 def test_wall_columns_reach_only_their_row_and_zone(setup):
-    """The Jacobian shares one evaluation between the two coils' walls i: that is exact only
+    """The Jacobian shares evaluations between columns of the two zones: that is exact only
     if a wall temperature moves nothing outside its own row and its zone (with rain on the
     indoor coil, a charge error and an integral term, so every source is active)."""
     unit, model, tables, c, y, inputs = setup
@@ -167,3 +167,29 @@ def test_out_of_range_state_is_flagged_not_raised(setup):
     out = np.empty(model.n_eval)
     assert not model.evaluate(y, inputs, c, tables, dydt, out)
     assert np.isnan(out).all()
+
+
+def test_jacobian_is_the_dense_forward_difference(setup):
+    """The Jacobian differences most columns with the flows between the zones held and adds
+    their reach through the cell sums; every column still equals the plain forward difference
+    of the whole right-hand side with the same step (with a charge error, an integral term and
+    rain on the indoor coil, so that every coupling is active)."""
+    _, model, tables, c, y, inputs = setup
+    c = c.copy()
+    c[0]["controller"]["m0"] *= 1.01
+    y = y.copy()
+    y[-1] = 0.3
+    inputs = inputs.copy()
+    inputs[4] = 0.6
+    f0, f, out = np.empty(y.size), np.empty(y.size), np.empty(model.n_eval)
+    model.evaluate(y, inputs, c, tables, f0, out)
+    jac = model.jacobian(y, inputs, c, tables, f0.copy())
+    dense = np.empty_like(jac)
+    for j in range(y.size):
+        step = 1e-7 * max(abs(y[j]), 1.0)
+        shifted = y.copy()
+        shifted[j] += step
+        model.evaluate(shifted, inputs, c, tables, f, out)
+        dense[:, j] = (f - f0) / step
+    scale = np.abs(dense).max(axis=1, keepdims=True)
+    assert np.all(np.abs(jac - dense) <= 1e-6 * scale)

@@ -23,12 +23,13 @@ from pymc_vcc.physics.components.smooth import upwind_weight
 
 
 @njit(cache=True, error_model="numpy")
-def _sweep(volume, rho, drho_dp, drho_dh, h, source, inflow, dp_guess, flow_eps):
+def _sweep(volume, rho, drho_dp, drho_dh, h, source, inflow, dp_guess, flow_eps, alpha, beta):
+    """One sweep with the upwind weights at ``dp_guess``: each cell's dh/dt as
+    ``alpha + beta dp/dt`` into ``alpha`` and ``beta``; returns the zone outflow as
+    ``(a, b)``, outflow = a + b dp/dt."""
     n = h.size
     a_flow = inflow
     b_flow = 0.0
-    alpha = np.empty(n)
-    beta = np.empty(n)
     for i in range(n):
         if i == 0:
             transport_a = 0.0
@@ -42,7 +43,7 @@ def _sweep(volume, rho, drho_dp, drho_dh, h, source, inflow, dp_guess, flow_eps)
         beta[i] = (transport_b + volume[i]) / stored
         a_flow = a_flow - volume[i] * drho_dh[i] * alpha[i]
         b_flow = b_flow - volume[i] * (drho_dh[i] * beta[i] + drho_dp[i])
-    return alpha, beta, a_flow, b_flow
+    return a_flow, b_flow
 
 
 @njit(cache=True, error_model="numpy")
@@ -65,14 +66,15 @@ def zone_derivatives(
     affine solve repeated once with them, a fixed two-pass scheme (so the result is a smooth
     function of the state). Total mass is conserved exactly: Σ V dρ/dt = inflow - outflow.
     """
-    alpha, beta, a_out, b_out = _sweep(
-        volume, rho, drho_dp, drho_dh, h, source, inflow, 0.0, flow_eps
+    beta = np.empty(h.size)  # dh_dt holds the alphas
+    a_out, b_out = _sweep(
+        volume, rho, drho_dp, drho_dh, h, source, inflow, 0.0, flow_eps, dh_dt, beta
     )
     dp_dt = (outflow - a_out) / b_out
-    alpha, beta, a_out, b_out = _sweep(
-        volume, rho, drho_dp, drho_dh, h, source, inflow, dp_dt, flow_eps
+    a_out, b_out = _sweep(
+        volume, rho, drho_dp, drho_dh, h, source, inflow, dp_dt, flow_eps, dh_dt, beta
     )
     dp_dt = (outflow - a_out) / b_out
     for i in range(h.size):
-        dh_dt[i] = alpha[i] + beta[i] * dp_dt
+        dh_dt[i] += beta[i] * dp_dt
     return dp_dt
