@@ -2,12 +2,14 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from pymc_vcc.cli import main
+from pymc_vcc.physics.inputs import builtin_inputs, input_segments, window
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.real_units import _summarise
-from pymc_vcc.studies.unit_log import fixed_spread
+from pymc_vcc.studies.unit_log import fixed_spread, held_inputs
 
 
 @pytest.mark.slow
@@ -59,3 +61,23 @@ def test_held_parameters_spread_by_their_stated_tolerance():
     assert (low, high) == pytest.approx((0.99 * 19.0, 1.01 * 19.0))
     assert spread["HTC_CV"] == pytest.approx((0.8 * 800.0, 1.2 * 800.0))  # no tolerance stated
     assert spread["L_LIQ"] == pytest.approx((19.0, 21.0))
+
+
+def test_logged_inputs_are_held_at_their_mean_over_each_step():
+    """A logger's noise at every row would restart the solver at every row."""
+    profile = window(builtin_inputs(), 1060.0)
+    for got, held_as_given in zip(
+        input_segments(held_inputs(profile)), input_segments(profile), strict=True
+    ):
+        assert np.array_equal(got, held_as_given)  # a stepped profile is unchanged
+    times = np.arange(0.0, 1061.0)
+    logged = profile.reindex(time=times, method="ffill")
+    noise = np.random.default_rng(0).normal(0.0, 0.05, times.size)
+    logged["T_ambient"] = logged["T_ambient"] + noise  # K, every row
+    assert len(input_segments(logged)[0]) == times.size  # a restart at every row
+    held = held_inputs(logged)
+    edges, _ = input_segments(held)
+    assert np.array_equal(edges, input_segments(profile)[0])  # the steps, and only them
+    first_step = logged["T_ambient"].sel(time=slice(0.0, 119.0)).mean()
+    assert float(held["T_ambient"][0]) == pytest.approx(float(first_step))
+    assert held["T_ambient"].attrs["units"] == "K"

@@ -14,6 +14,7 @@ settling), so a record taken from a running unit needs no start-up transient.
 
 from __future__ import annotations
 
+import itertools
 import time
 import warnings
 from collections.abc import Sequence
@@ -140,6 +141,26 @@ def plateau_edges(inputs: xr.Dataset) -> np.ndarray:
                 starts.append(k)
                 break
     return np.append(edges[starts], edges[-1])
+
+
+def held_inputs(inputs: xr.Dataset) -> xr.Dataset:
+    """The logged inputs held at their mean over each operating step (:func:`plateau_edges`).
+
+    A logger reads its inputs with noise at every row; run as logged, the solver would restart
+    at every row (2 s a simulation of a 1 s log instead of 0.04 s). What is lost is part of
+    the inputs' logging error, which the error budget spreads."""
+    edges = plateau_edges(inputs)
+    time = np.asarray(inputs["time"].values, dtype=float)
+    steps = [
+        inputs.isel(time=np.flatnonzero((time >= start) & (time < end))).mean(
+            "time", keep_attrs=True
+        )
+        for start, end in itertools.pairwise(edges)
+    ]
+    held = xr.concat([*steps, steps[-1]], dim="time", combine_attrs="override")
+    held = held.assign_coords(time=edges)
+    held["time"].attrs = dict(inputs["time"].attrs)
+    return held
 
 
 def fixed_spread(
@@ -273,7 +294,7 @@ def calibrate_record(
     t_end = float(observed["time"].values[-1])
     model = VCCSimulator(
         unit,
-        inputs,
+        held_inputs(inputs),
         outputs=[str(name) for name in observed.data_vars],
         t_window=(0.0, t_end),
         parameters=prior.names,
