@@ -132,28 +132,41 @@ def test_jacobian_matches_central_differences(setup):
         assert np.max(np.abs(jac[:, j] - central)) < 1e-3 * scale
 
 
-def test_wall_columns_reach_only_their_row_and_zone(setup):
-    """The Jacobian shares evaluations between columns of the two zones: that is exact only
-    if a wall temperature moves nothing outside its own row and its zone (with rain on the
-    indoor coil, a charge error and an integral term, so every source is active)."""
-    unit, model, tables, c, y, inputs = setup
+def _every_coupling_active(setup):
+    """The Jacobian with a charge error, an integral term and rain on the indoor coil (every
+    source active), and the forward difference of the whole right-hand side in column j with
+    the Jacobian's step."""
+    _, model, tables, c, y, inputs = setup
     c = c.copy()
     c[0]["controller"]["m0"] *= 1.01
     y = y.copy()
     y[-1] = 0.3
     inputs = inputs.copy()
     inputs[4] = 0.6
-    layout = model.layout(unit.discretisation.n_volumes)
-    f0, f, out = np.empty(y.size), np.empty(y.size), np.empty(model.n_eval)
+    f0, out = np.empty(y.size), np.empty(model.n_eval)
     model.evaluate(y, inputs, c, tables, f0, out)
     jac = model.jacobian(y, inputs, c, tables, f0.copy())
+
+    def column(j):
+        step = 1e-7 * max(abs(y[j]), 1.0)
+        shifted, f = y.copy(), np.empty(y.size)
+        shifted[j] += step
+        model.evaluate(shifted, inputs, c, tables, f, out)
+        return (f - f0) / step
+
+    return jac, column
+
+
+def test_wall_columns_reach_only_their_row_and_zone(setup):
+    """The Jacobian shares evaluations between columns of the two zones: that is exact only
+    if a wall temperature moves nothing outside its own row and its zone (with rain on the
+    indoor coil, a charge error and an integral term, so every source is active)."""
+    unit, model = setup[:2]
+    layout = model.layout(unit.discretisation.n_volumes)
+    jac, column = _every_coupling_active(setup)
     for block, (p_index, cells) in (("Tw_cond", layout.zones[0]), ("Tw_evap", layout.zones[1])):
         for j in range(layout[block].start, layout[block].stop):
-            step = 1e-7 * max(abs(y[j]), 1.0)
-            shifted = y.copy()
-            shifted[j] += step
-            model.evaluate(shifted, inputs, c, tables, f, out)
-            alone = (f - f0) / step
+            alone = column(j)
             reached = np.flatnonzero(alone)
             assert set(reached) <= {j, *range(p_index, p_index + cells + 1)}, (block, j)
             np.testing.assert_allclose(jac[:, j], alone, rtol=1e-9, atol=0.0)
@@ -174,22 +187,7 @@ def test_jacobian_is_the_dense_forward_difference(setup):
     their reach through the cell sums; every column still equals the plain forward difference
     of the whole right-hand side with the same step (with a charge error, an integral term and
     rain on the indoor coil, so that every coupling is active)."""
-    _, model, tables, c, y, inputs = setup
-    c = c.copy()
-    c[0]["controller"]["m0"] *= 1.01
-    y = y.copy()
-    y[-1] = 0.3
-    inputs = inputs.copy()
-    inputs[4] = 0.6
-    f0, f, out = np.empty(y.size), np.empty(y.size), np.empty(model.n_eval)
-    model.evaluate(y, inputs, c, tables, f0, out)
-    jac = model.jacobian(y, inputs, c, tables, f0.copy())
-    dense = np.empty_like(jac)
-    for j in range(y.size):
-        step = 1e-7 * max(abs(y[j]), 1.0)
-        shifted = y.copy()
-        shifted[j] += step
-        model.evaluate(shifted, inputs, c, tables, f, out)
-        dense[:, j] = (f - f0) / step
+    jac, column = _every_coupling_active(setup)
+    dense = np.column_stack([column(j) for j in range(jac.shape[1])])
     scale = np.abs(dense).max(axis=1, keepdims=True)
     assert np.all(np.abs(jac - dense) <= 1e-6 * scale)

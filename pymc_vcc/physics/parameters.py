@@ -99,6 +99,17 @@ class ParameterSpec:
                 f"got {self.tolerance!r}"
             )
 
+    def known_range(self, spread: float | None = None) -> tuple[float, float]:
+        """Where the value lies when it is not calibrated: ± its tolerance (else ± ``spread``)
+        × nominal inside the bounds; the bounds when neither is given."""
+        known_to = self.tolerance if self.tolerance is not None else spread
+        if known_to is None:
+            return self.low, self.high
+        return (
+            max(self.low, self.nominal * (1.0 - known_to)),
+            min(self.high, self.nominal * (1.0 + known_to)),
+        )
+
 
 @dataclass(frozen=True)
 class ParameterTable:

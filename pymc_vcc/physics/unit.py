@@ -310,7 +310,7 @@ def _section(source: str, section: str, cls: type, raw: Any) -> Any:
     return cls(**values)
 
 
-_PARAMETER_KEYS = ["name", "unit", "bounds", "nominal"]
+_PARAMETER_KEYS = ["name", "unit", "bounds", "nominal", "tolerance"]
 
 
 def _parameters(source: str, raw: Any, expected: ParameterIds) -> ParameterTable:
@@ -321,12 +321,7 @@ def _parameters(source: str, raw: Any, expected: ParameterIds) -> ParameterTable
         where = f"{source} [parameters.{pid}]"
         if not isinstance(entry, dict):
             raise ValueError(f"{where}: expected a table with name, unit, bounds, nominal")
-        _check_keys(
-            where,
-            entry,
-            ["name", "unit", "bounds", "nominal", "tolerance"],
-            frozenset({"tolerance"}),
-        )
+        _check_keys(where, entry, _PARAMETER_KEYS, frozenset({"tolerance"}))
         bounds = entry["bounds"]
         if (
             not isinstance(bounds, list)

@@ -105,11 +105,8 @@ def identify_study(
         parameters=parameters,
     )
     point = {spec.id: spec.nominal for spec in unit.parameters} | dict(at or {})
-    known = {  # uniform within the stated tolerance; the others uniform on their bounds
-        spec.id: spec.tolerance * spec.nominal / np.sqrt(3.0)
-        for spec in unit.parameters
-        if spec.tolerance is not None and spec.id in examined
-    }
+    ranges = {spec.id: spec.known_range() for spec in unit.parameters if spec.id in examined}
+    known = {pid: (high - low) / np.sqrt(12.0) for pid, (low, high) in ranges.items()}
     with settings.open_executor() as executor:
         found = identifiability(
             simulator,

@@ -168,15 +168,9 @@ def fixed_spread(
 ) -> dict[str, tuple[float, float]]:
     """The range of each parameter the calibration holds at nominal: ± its tolerance (or
     ``spread`` when the unit states none) × nominal, inside the unit's bounds."""
-    table = {}
-    for spec in unit.parameters:
-        if spec.id in inferred:
-            continue
-        known_to = spread if spec.tolerance is None else spec.tolerance
-        low = max(spec.low, spec.nominal * (1.0 - known_to))
-        high = min(spec.high, spec.nominal * (1.0 + known_to))
-        table[spec.id] = (low, high)
-    return table
+    return {
+        spec.id: spec.known_range(spread) for spec in unit.parameters if spec.id not in inferred
+    }
 
 
 def error_budget(
