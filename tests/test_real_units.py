@@ -81,3 +81,52 @@ def test_logged_inputs_are_held_at_their_mean_over_each_step():
     first_step = logged["T_ambient"].sel(time=slice(0.0, 119.0)).mean()
     assert float(held["T_ambient"][0]) == pytest.approx(float(first_step))
     assert held["T_ambient"].attrs["units"] == "K"
+
+
+@pytest.mark.slow
+def test_finer_coils_read_as_the_model_at_a_higher_charge():
+    """Most of the model's discretisation error is an equivalent charge: the model at the
+    measured offset reproduces the 20-volume unit far better than at the same charge."""
+    from pymc_vcc.execution.executors import make_executor
+    from pymc_vcc.inference.error_model import SensorAccuracy, summarise
+    from pymc_vcc.physics.simulate import VCCSimulator
+    from pymc_vcc.studies.truths import generate_truth
+    from pymc_vcc.studies.unit_log import (
+        FINE_VOLUMES,
+        SETTLE,
+        CoilOffset,
+        SensorBudget,
+        coil_offset,
+    )
+
+    truth = generate_truth("model", seed=2, charge=1.5, t_end=600.0)
+    unit = load_unit()
+    fine_unit = unit.with_changes(discretisation={"n_volumes": FINE_VOLUMES})
+    model, fine = (
+        VCCSimulator(u, held_inputs(truth.inputs), t_window=(0.0, 600.0), settle=SETTLE)
+        for u in (unit, fine_unit)
+    )
+    sensors = SensorBudget.of(model, truth.observed, SensorAccuracy())
+    with make_executor("processes", 2) as executor:
+        offset, n_runs = coil_offset(
+            model, fine_unit, sensors.scale, sensors.windows, executor, (0.9, 2.2)
+        )
+    assert n_runs > 100 and offset.charges.size >= 4
+    assert np.all((0.01 < offset.offsets) & (offset.offsets < 0.08))  # kg: tens of grams
+
+    def misfit(charge: float, model_charge: float) -> float:
+        runs = [sim({"M0": c}) for sim, c in ((fine, charge), (model, model_charge))]
+        unit_s, model_s = (
+            summarise(np.stack([r[n].values for n in r.data_vars]), sensors.windows)
+            for r in runs
+        )
+        return float((((unit_s - model_s) / sensors.scale) ** 2).sum())
+
+    for charge in (1.2, 1.7):
+        shifted = misfit(charge, charge + float(offset(charge)))
+        assert shifted < misfit(charge, charge) / 4
+
+    constant = CoilOffset(np.array([1.0, 2.0]), np.array([0.04, 0.04]))
+    unit_charges = constant.unit_charge(np.full(4000, 1.5), np.random.default_rng(0))
+    assert unit_charges.min() >= 1.5 - 2 * 0.04 and unit_charges.max() <= 1.5
+    assert unit_charges.mean() == pytest.approx(1.46, abs=0.003)  # continuum: twice the offset

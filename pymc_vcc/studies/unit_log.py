@@ -8,6 +8,10 @@ within their accuracy, and the model's error against a finer unit whose other pa
 spread around nominal, whose logged inputs are off and whose sensors lag). Their prior is the
 commissioning posterior when there is one (plus drift), else the unit's box.
 
+The model's coarse coils read as a different charge (:class:`CoilOffset`): each calibration
+measures that offset first, draws the model's error against finer coils at the charge that
+reads the same, and reports the unit's charge (``M0``) beside the model's (``M0_model``).
+
 The model starts from its steady state at the record's first inputs (:data:`SETTLE` s of
 settling), so a record taken from a running unit needs no start-up transient.
 """
@@ -75,15 +79,119 @@ PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
 PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in sample_stats
 
 
+COIL_OFFSET_CHARGES = 6  # charges at which the coils' charge offset is measured
+COIL_OFFSET_STEP = 0.01  # kg between the model's charges searched for each offset
+
+
+@dataclass(frozen=True)
+class CoilOffset:
+    """How much more charge the model needs than a unit with :data:`FINE_VOLUMES` coils to
+    read the same: the model at ``charge + offset(charge)`` reproduces the finer unit at
+    ``charge`` (kg; measured at nominal parameters on the record's inputs).
+
+    A finer coil resolves where the refrigerant turns from two-phase to vapour, and holds a
+    little less of it at the same pressures: most of the model's discretisation error on a
+    record is this equivalent charge (on the built-in unit 0.03-0.05 kg at 20 volumes, 0.05
+    at 30, 0.06 at 40: first order, like the outputs), not a misfit of the outputs' shapes.
+    """
+
+    charges: np.ndarray
+    offsets: np.ndarray
+
+    def __call__(self, charge: np.ndarray | float) -> np.ndarray:
+        """The offset at ``charge`` (kg), held constant beyond the measured charges."""
+        return np.interp(charge, self.charges, self.offsets)
+
+    def unit_charge(self, model_charge: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The unit's charge of each model charge draw, kg: the unit's coils drawn, like the
+        model-error draws, uniformly between the model's (offset 0) and the continuum
+        (:data:`CONTINUUM` × the offset)."""
+        fineness = rng.uniform(0.0, CONTINUUM, np.shape(model_charge))
+        return model_charge - fineness * self(model_charge)
+
+
+def coil_offset(
+    model: VCCSimulator,
+    fine_unit: Unit,
+    scale: np.ndarray,
+    windows: Sequence[np.ndarray],
+    executor: Executor,
+    charge_range: tuple[float, float],
+) -> tuple[CoilOffset, int]:
+    """Measure :class:`CoilOffset` over ``charge_range`` (kg), and count its simulations: the
+    finer unit at :data:`COIL_OFFSET_CHARGES` charges, the model on a grid every
+    :data:`COIL_OFFSET_STEP` kg, each offset where the summaries' misfit (in units of
+    ``scale``) is least."""
+    low, high = charge_range
+    margin = 0.1 * (high - low)
+    grid = np.arange(low - margin, high + margin + COIL_OFFSET_STEP / 2, COIL_OFFSET_STEP)
+    charges = np.linspace(low, high, COIL_OFFSET_CHARGES + 2)[1:-1]
+    fine = VCCSimulator(
+        fine_unit,
+        model.inputs,
+        outputs=model.output_names,
+        t_window=model.t_window,
+        solver=model.solver,
+        settle=model.settle,
+    )
+    nominal = VCCSimulator(
+        model.unit,
+        model.inputs,
+        outputs=model.output_names,
+        t_window=model.t_window,
+        solver=model.solver,
+        settle=model.settle,
+    )
+    tasks = [(fine, float(c)) for c in charges] + [(nominal, float(c)) for c in grid]
+    runs = executor.map(_run_at_charge, tasks)
+    summaries = [
+        None if run.attrs["status"] != "ok" else summarise(_series(run), windows) for run in runs
+    ]
+    targets, candidates = summaries[: charges.size], summaries[charges.size :]
+    usable = np.array([s is not None for s in candidates])
+    model_grid = grid[usable]
+    model_summaries = np.array([s for s in candidates if s is not None])
+    measured, offsets = [], []
+    for charge, target in zip(charges, targets, strict=True):
+        if target is None or model_grid.size < 3:
+            continue
+        misfit = (((model_summaries - target) / scale) ** 2).sum(axis=1)
+        best = int(np.argmin(misfit))
+        if best in (0, model_grid.size - 1):
+            continue
+        left, mid, right = misfit[best - 1 : best + 2]
+        curvature = left - 2 * mid + right
+        step = 0.5 * (left - right) / curvature if curvature > 0 else 0.0
+        measured.append(charge)
+        offsets.append(model_grid[best] + step * COIL_OFFSET_STEP - charge)
+    if not measured:
+        raise RuntimeError(
+            "the model reproduced the finer unit at none of the charges tried: no coil "
+            "offset can be measured on this record"
+        )
+    return CoilOffset(np.array(measured), np.array(offsets)), len(tasks)
+
+
+def _run_at_charge(task: tuple[VCCSimulator, float]) -> xr.Dataset:
+    simulator, charge = task
+    return simulator({CHARGE: charge})
+
+
+def _series(run: xr.Dataset) -> np.ndarray:
+    return np.stack([run[name].values for name in run.data_vars])
+
+
 @dataclass(frozen=True)
 class ErrorPair:
     """Picklable: the unit's and the model's series for one draw of what is not inferred (the
-    unit is the model's coils moved ``fineness`` steps toward :data:`FINE_VOLUMES`; 3 runs)."""
+    unit is the model's coils moved ``fineness`` steps toward :data:`FINE_VOLUMES`, its
+    charge ``fineness`` × :class:`CoilOffset` below the model's; 3 runs)."""
 
     model: VCCSimulator
     fine_unit: Unit
     times: np.ndarray
     accuracy: SensorAccuracy
+    offset: CoilOffset | None = None
 
     def __call__(self, draw: dict) -> tuple[np.ndarray, np.ndarray] | None:
         logged = self.accuracy.shift_inputs(self.model.inputs, draw["input_errors"])
@@ -99,7 +207,10 @@ class ErrorPair:
             for unit in (self.fine_unit, self.model.unit)
         ]
         true_parameters = {**draw["fixed"], **draw["theta"]}
-        runs = [unit(true_parameters) for unit in units] + [self.model(draw["theta"])]
+        fine_parameters = dict(true_parameters)
+        if self.offset is not None:
+            fine_parameters[CHARGE] -= float(self.offset(true_parameters[CHARGE]))
+        runs = [units[0](fine_parameters), units[1](true_parameters), self.model(draw["theta"])]
         if any(run.attrs["status"] != "ok" for run in runs):
             return None
         fine, coarse, model = (
@@ -173,6 +284,39 @@ def fixed_spread(
     }
 
 
+@dataclass(frozen=True)
+class SensorBudget:
+    """The record's plateau summaries and the sensors' part of their error (see
+    :mod:`pymc_vcc.inference.error_model`)."""
+
+    outputs: tuple[str, ...]
+    windows: list[np.ndarray]
+    observed: np.ndarray
+    parts: dict[str, np.ndarray]
+
+    @classmethod
+    def of(
+        cls, model: VCCSimulator, observed: xr.Dataset, accuracy: SensorAccuracy
+    ) -> SensorBudget:
+        """The sensors' budget of ``observed`` (outputs of ``model``, on its time grid)."""
+        outputs = tuple(str(name) for name in observed.data_vars)
+        times = observed["time"].values
+        windows = plateau_windows(plateau_edges(model.inputs) - model.t_window[0], times)
+        values = np.stack([observed[name].values for name in outputs])
+        summaries = summarise(values, windows)
+        units = [observed[name].attrs["units"] for name in outputs]
+        parts = {
+            "noise": np.diag(noise_variance(values, windows)),
+            "bias": bias_covariance(summaries, units, len(windows), accuracy),
+        }
+        return cls(outputs, windows, summaries, parts)
+
+    @property
+    def scale(self) -> np.ndarray:
+        """Standard deviation of each summary from the sensors alone (SI)."""
+        return np.sqrt(np.diag(sum(self.parts.values())))
+
+
 def error_budget(
     model: VCCSimulator,
     observed: xr.Dataset,
@@ -185,18 +329,15 @@ def error_budget(
     fine_volumes: int = FINE_VOLUMES,
     spread: float = FIXED_SPREAD,
     thetas: np.ndarray | None = None,
+    offset: CoilOffset | None = None,
 ) -> ErrorBudget:
     """The error budget of ``observed`` (outputs of ``model``, on its time grid) for a
     calibration of ``prior``'s parameters (see the module docstring); the inferred parameters
     of the model-error draws are ``thetas`` (rows in ``prior.names`` order, e.g. an earlier
-    posterior's draws) or ``n_draws`` draws of the prior."""
+    posterior's draws) or ``n_draws`` draws of the prior. With ``offset``, the model's error
+    is drawn against finer coils at the charge that reads the same (:class:`CoilOffset`)."""
     accuracy = SensorAccuracy() if accuracy is None else accuracy
-    outputs = tuple(str(name) for name in observed.data_vars)
-    times = observed["time"].values
-    windows = plateau_windows(plateau_edges(model.inputs) - model.t_window[0], times)
-    values = np.stack([observed[name].values for name in outputs])
-    observed_summaries = summarise(values, windows)
-    units = [observed[name].attrs["units"] for name in outputs]
+    sensors = SensorBudget.of(model, observed, accuracy)
     fixed = fixed_spread(model.unit, prior.names, spread)
     thetas = prior.sample(n_draws, rng) if thetas is None else thetas
     draws = [
@@ -207,25 +348,25 @@ def error_budget(
                 name: float(rng.uniform(-bound, bound))
                 for name, (_, bound) in accuracy.inputs.items()
             },
-            "lags": rng.uniform(0.0, accuracy.lag, len(outputs)),
+            "lags": rng.uniform(0.0, accuracy.lag, len(sensors.outputs)),
             "fineness": float(rng.uniform(0.0, CONTINUUM)),
         }
         for row in thetas
     ]
     pair = ErrorPair(
-        model, model.unit.with_changes(discretisation={"n_volumes": fine_volumes}), times, accuracy
+        model,
+        model.unit.with_changes(discretisation={"n_volumes": fine_volumes}),
+        observed["time"].values,
+        accuracy,
+        offset,
     )
-    mean, model_cov, n_ok = approximation_error(pair, draws, windows, executor)
+    mean, model_cov, n_ok = approximation_error(pair, draws, sensors.windows, executor)
     return ErrorBudget(
-        outputs=outputs,
-        windows=windows,
-        observed=observed_summaries,
+        outputs=sensors.outputs,
+        windows=sensors.windows,
+        observed=sensors.observed,
         mean=mean,
-        parts={
-            "noise": np.diag(noise_variance(values, windows)),
-            "bias": bias_covariance(observed_summaries, units, len(windows), accuracy),
-            "model": model_cov,
-        },
+        parts={**sensors.parts, "model": model_cov},
         n_draws=n_ok,
         n_failed=n_draws - n_ok,
     )
@@ -275,7 +416,10 @@ def calibrate_record(
         progressbar: show PyMC's progress bar.
 
     Returns:
-        The ArviZ DataTree; ``sample_stats`` also holds the predictive check per output
+        The ArviZ DataTree. When the charge is inferred, ``posterior`` holds the unit's
+        charge in ``M0`` and the model's equivalent charge in ``M0_model`` (they differ by the
+        coils' offset, :class:`CoilOffset`, measured first: ``coil_offset_kg`` in
+        ``sample_stats``). ``sample_stats`` also holds the predictive check per output
         (``ppc_z_mean``, ``ppc_p_value``, ``ppc_misfit``), the last error budget's size
         (``error_draws``, ``error_failed``, ``error_rounds``) and every simulation's count
         (``n_simulations``).
@@ -295,7 +439,19 @@ def calibrate_record(
         solver=solver,
         settle=SETTLE,
     )
-    thetas, simulations = None, 0
+    accuracy = SensorAccuracy() if accuracy is None else accuracy
+    thetas, simulations, offset = None, 0, None
+    if CHARGE in prior.names:
+        sensors = SensorBudget.of(model, observed, accuracy)
+        spec = unit.parameters[CHARGE]
+        offset, simulations = coil_offset(
+            model,
+            unit.with_changes(discretisation={"n_volumes": FINE_VOLUMES}),
+            sensors.scale,
+            sensors.windows,
+            executor,
+            (spec.low, spec.high),
+        )
     for last in [False] * (rounds - 1) + [True]:
         share = 1.0 if last else SCOUTING_SHARE
         n_error = max(MIN_ERROR_DRAWS, round(share * error_draws))
@@ -308,6 +464,7 @@ def calibrate_record(
             accuracy=accuracy,
             n_draws=n_error,
             thetas=None if thetas is None else thetas[rng.choice(len(thetas), n_error)],
+            offset=offset,
         )
         with pm.Model():
             add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
@@ -328,6 +485,11 @@ def calibrate_record(
         stats[f"ppc_{key}"] = xr.DataArray(
             [check[name][key] for name in budget.outputs], dims="output", coords=coords
         )
+    if offset is not None:
+        _to_unit_charge(tree, offset, rng)
+        stats["coil_offset_kg"] = xr.DataArray(
+            offset.offsets, dims="offset_charge", coords={"offset_charge": offset.charges}
+        )
     stats["error_draws"] = budget.n_draws
     stats["error_failed"] = budget.n_failed
     stats["error_rounds"] = rounds
@@ -345,6 +507,16 @@ def calibrate_record(
             stacklevel=2,
         )
     return tree
+
+
+def _to_unit_charge(tree: xr.DataTree, offset: CoilOffset, rng: np.random.Generator) -> None:
+    """Rename the sampled charge ``M0_model`` and put the unit's charge in ``M0``."""
+    posterior = tree["posterior"].to_dataset()
+    model_charge = posterior[CHARGE]
+    unit_charge = offset.unit_charge(model_charge.values, rng)
+    posterior[f"{CHARGE}_model"] = model_charge
+    posterior[CHARGE] = model_charge.copy(data=unit_charge)
+    tree["posterior"] = xr.DataTree(posterior)
 
 
 def _predictive_check(
