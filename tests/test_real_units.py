@@ -112,13 +112,12 @@ def test_finer_coils_read_as_the_model_at_a_higher_charge():
             model, fine_unit, sensors.scale, sensors.windows, executor, (0.9, 2.2)
         )
     assert n_runs > 100 and offset.charges.size >= 4
-    assert np.all((0.01 < offset.offsets) & (offset.offsets < 0.08))  # kg: tens of grams
+    assert np.all((offset.offsets > 0.01) & (offset.offsets < 0.08))  # kg: tens of grams
 
     def misfit(charge: float, model_charge: float) -> float:
         runs = [sim({"M0": c}) for sim, c in ((fine, charge), (model, model_charge))]
         unit_s, model_s = (
-            summarise(np.stack([r[n].values for n in r.data_vars]), sensors.windows)
-            for r in runs
+            summarise(np.stack([r[n].values for n in r.data_vars]), sensors.windows) for r in runs
         )
         return float((((unit_s - model_s) / sensors.scale) ** 2).sum())
 
