@@ -64,7 +64,13 @@ from pymc.pytensorf import floatX
 from pymc.smc.kernels import IMH, MH, Pearson
 from xarray import DataTree
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind, SerialExecutor, executor_scope
+from pymc_vcc.execution.executors import (
+    Executor,
+    ExecutorKind,
+    ProcessExecutor,
+    SerialExecutor,
+    executor_scope,
+)
 from pymc_vcc.execution.outcomes import OK
 from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore, describe_callable
 from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest
@@ -119,7 +125,9 @@ class ParallelKernel:
 
     Args:
         executor: where simulations run, an executor of :mod:`pymc_vcc.execution.executors`
-            (the caller opens and closes it); None runs them in this process.
+            (the caller opens and closes it); None: local worker processes on every core
+            (``make_executor("processes")``), opened at a chain's first simulation and closed
+            at its end.
         checkpoint: an open :class:`~pymc_vcc.execution.store.LikelihoodStore` (the caller opens
             and closes it, fingerprinting the run: :func:`sample_smc_abc` does): each finished
             simulation is persisted there, and one already there is not run again.
@@ -154,7 +162,8 @@ class ParallelKernel:
                 f"(make_executor(...)) or None, "
                 f"got {type(executor).__name__}; sample_smc_abc also accepts a kind name"
             )
-        self.executor: Executor = SerialExecutor() if executor is None else executor
+        self.executor = executor
+        self._owns_executor = False  # True while a pool opened for want of an executor runs
         self.checkpoint = checkpoint
         self._finished: dict[str, LikelihoodRecord] = {}
         self._likelihood = BatchLikelihood(
@@ -184,7 +193,7 @@ class ParallelKernel:
                 "pymc_vcc.inference.pymc.smc.sample_smc_abc)"
             )
         state = self.__dict__.copy()
-        if not isinstance(self.executor, SerialExecutor):
+        if self.executor is not None and not isinstance(self.executor, SerialExecutor):
             warnings.warn(
                 "pm.sample_smc runs chains in separate (daemonic) processes here (cores > 1 and "
                 "chains > 1); they cannot use the executor, so each chain simulates its "
@@ -204,6 +213,18 @@ class ParallelKernel:
         self._finished = self.checkpoint.load() if self.checkpoint is not None else {}
         super().initialize(start, rng)
 
+    def _workers(self) -> Executor:
+        """The executor simulating: the caller's, else a pool on every core opened now."""
+        if self.executor is None:
+            self.executor, self._owns_executor = ProcessExecutor(), True
+        return self.executor
+
+    def _close_own_executor(self) -> None:
+        """Close the pool this kernel opened for want of an executor (if it did)."""
+        if self._owns_executor and self.executor is not None:
+            self.executor.close()
+            self.executor, self._owns_executor = None, False
+
     def _simulated_loglik(self, points: np.ndarray, prior_logp: np.ndarray) -> np.ndarray:
         """Log-likelihood of points, simulating (in one batch) only those the prior allows and
         the checkpoint does not hold yet."""
@@ -220,7 +241,7 @@ class ParallelKernel:
         ]
         records: list[LikelihoodRecord | None] = [self._finished.get(key) for key in keys]
         todo = [number for number, record in enumerate(records) if record is None]
-        with closing(self._likelihood.run(self.executor, [tasks[n] for n in todo])) as chunks:
+        with closing(self._likelihood.run(self._workers(), [tasks[n] for n in todo])) as chunks:
             for chunk in chunks:
                 finished = []
                 for position, outcome in chunk:
@@ -280,6 +301,7 @@ class ParallelKernel:
         self.tempered_posterior = np.array(floatX(particles))
         self.prior_logp, self.likelihood_logp = self._tempering_terms(self.tempered_posterior)
         if not np.isfinite(self.likelihood_logp).any():
+            self._close_own_executor()
             raise RuntimeError(
                 f"all {self.draws} simulations of the initial population failed or have zero "
                 f"likelihood; failures: {dict(self.failure_kinds)}, e.g. "
@@ -351,7 +373,9 @@ class ParallelKernel:
         return self.likelihood_logp + self.prior_logp - prior_logp.reshape(-1)
 
     def sample_settings(self) -> dict[str, int | float | str]:
-        return {
+        """The stock kernel's settings with this run's; PyMC's last call on a chain, so the
+        pool opened for want of an executor is closed here."""
+        settings = {
             **super().sample_settings(),
             "kernel": next(name for name, kind in KERNELS.items() if isinstance(self, kind)),
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
@@ -360,15 +384,19 @@ class ParallelKernel:
             "max_steps": self.max_steps or 0,  # 0: no cap
             "executor": repr(self.executor),
         }
+        self._close_own_executor()
+        return settings
 
 
 class ParallelIMH(ParallelKernel, IMH):
     """PyMC's independent Metropolis–Hastings SMC kernel (proposals from a Gaussian fitted to
     the particles) with the simulations of all particles run as one parallel batch.
 
-    Use it as ``pm.sample_smc(kernel=ParallelIMH, executor=ex, chains=1, ...)`` on a model
-    with ``pm.Simulator`` nodes (e.g. from :func:`pymc_vcc.inference.pymc.model.add_simulator`), or
-    through :func:`sample_smc_abc`, which picks defaults suited to expensive simulators. Its
+    Use it as ``pm.sample_smc(kernel=ParallelIMH, chains=1, ...)`` on a model with
+    ``pm.Simulator`` nodes (e.g. from :func:`pymc_vcc.inference.pymc.model.add_simulator`):
+    without ``executor=`` its simulations run on every core; ``standard_layout(result, model)``
+    (:func:`~pymc_vcc.inference.pymc.layout.standard_layout`) gives the result the layout of
+    :func:`sample_smc_abc`, which runs it with defaults suited to expensive simulators. Its
     arguments are those of :class:`ParallelKernel`.
     """
 
