@@ -249,7 +249,7 @@ def test_chains_run_one_after_another_with_the_executor():
 def test_without_an_executor_the_kernel_simulates_on_every_core_and_closes_its_pool(
     monkeypatch,
 ):
-    opened = []  # held here, so that only the kernel's own close can stop the workers
+    opened = []  # held here: only the kernel's going can close its pool
 
     class Recorded(ProcessExecutor):
         def __init__(self) -> None:
@@ -260,8 +260,16 @@ def test_without_an_executor_the_kernel_simulates_on_every_core_and_closes_its_p
     sim = GaussianLocation(n_time=10)
     with pm.Model():
         add_simulator("y", sim, sim({"mu": 0.0}, np.random.default_rng(0)), epsilon=0.5)
-        idata = pm.sample_smc(draws=20, kernel=ParallelIMH, chains=1, random_seed=0, **QUIET)
-    assert [executor.n_workers for executor in opened] == [available_cores()]
+        idata = pm.sample_smc(
+            draws=20,
+            kernel=ParallelIMH,
+            chains=2,
+            cores=1,
+            random_seed=0,
+            compute_convergence_checks=False,
+            **QUIET,
+        )
+    assert [executor.n_workers for executor in opened] == [available_cores()]  # for both chains
     assert idata.sample_stats.attrs["executor"] == repr(opened[0])
     assert not [p for p in multiprocessing.active_children() if p.name == "pymc_vcc-worker"]
 

@@ -49,6 +49,7 @@ import hashlib
 import logging
 import time
 import warnings
+import weakref
 from collections import Counter
 from collections.abc import Callable
 from contextlib import closing
@@ -126,8 +127,8 @@ class ParallelKernel:
     Args:
         executor: where simulations run, an executor of :mod:`pymc_vcc.execution.executors`
             (the caller opens and closes it); None: local worker processes on every core
-            (``make_executor("processes")``), opened at a chain's first simulation and closed
-            at its end.
+            (``make_executor("processes")``), opened at the first simulation, kept for every
+            chain of the run and closed with the kernel (when ``pm.sample_smc`` returns).
         checkpoint: an open :class:`~pymc_vcc.execution.store.LikelihoodStore` (the caller opens
             and closes it, fingerprinting the run: :func:`sample_smc_abc` does): each finished
             simulation is persisted there, and one already there is not run again.
@@ -163,7 +164,6 @@ class ParallelKernel:
                 f"got {type(executor).__name__}; sample_smc_abc also accepts a kind name"
             )
         self.executor = executor
-        self._owns_executor = False  # True while a pool opened for want of an executor runs
         self.checkpoint = checkpoint
         self._finished: dict[str, LikelihoodRecord] = {}
         self._likelihood = BatchLikelihood(
@@ -214,16 +214,12 @@ class ParallelKernel:
         super().initialize(start, rng)
 
     def _workers(self) -> Executor:
-        """The executor simulating: the caller's, else a pool on every core opened now."""
+        """The executor simulating: the caller's, else a pool on every core, opened now and
+        closed when this kernel is gone."""
         if self.executor is None:
-            self.executor, self._owns_executor = ProcessExecutor(), True
+            self.executor = ProcessExecutor()
+            weakref.finalize(self, self.executor.close)
         return self.executor
-
-    def _close_own_executor(self) -> None:
-        """Close the pool this kernel opened for want of an executor (if it did)."""
-        if self._owns_executor and self.executor is not None:
-            self.executor.close()
-            self.executor, self._owns_executor = None, False
 
     def _simulated_loglik(self, points: np.ndarray, prior_logp: np.ndarray) -> np.ndarray:
         """Log-likelihood of points, simulating (in one batch) only those the prior allows and
@@ -301,7 +297,6 @@ class ParallelKernel:
         self.tempered_posterior = np.array(floatX(particles))
         self.prior_logp, self.likelihood_logp = self._tempering_terms(self.tempered_posterior)
         if not np.isfinite(self.likelihood_logp).any():
-            self._close_own_executor()
             raise RuntimeError(
                 f"all {self.draws} simulations of the initial population failed or have zero "
                 f"likelihood; failures: {dict(self.failure_kinds)}, e.g. "
@@ -373,9 +368,7 @@ class ParallelKernel:
         return self.likelihood_logp + self.prior_logp - prior_logp.reshape(-1)
 
     def sample_settings(self) -> dict[str, int | float | str]:
-        """The stock kernel's settings with this run's; PyMC's last call on a chain, so the
-        pool opened for want of an executor is closed here."""
-        settings = {
+        return {
             **super().sample_settings(),
             "kernel": next(name for name, kind in KERNELS.items() if isinstance(self, kind)),
             "failure_kinds": ", ".join(f"{k}: {n}" for k, n in sorted(self.failure_kinds.items())),
@@ -384,8 +377,6 @@ class ParallelKernel:
             "max_steps": self.max_steps or 0,  # 0: no cap
             "executor": repr(self.executor),
         }
-        self._close_own_executor()
-        return settings
 
 
 class ParallelIMH(ParallelKernel, IMH):
