@@ -55,6 +55,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.execution.store": ("CheckpointMismatchError",),
     "pymc_vcc.inference.pymc.model": ("add_simulator", "gmm_prior_variable"),
     "pymc_vcc.inference.pymc.smc": ("sample_smc_abc", "ParallelIMH"),
+    "pymc_vcc.inference.pymc.layout": ("standard_layout",),
     "pymc_vcc.inference.predictive": ("simulate_predictive", "predictive_bands"),
     "pymc_vcc.inference.sensitivity": ("sobol_indices",),
     "pymc_vcc.inference.identifiability": ("identifiability", "Identifiability"),
