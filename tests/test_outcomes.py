@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from pymc_vcc.execution.outcomes import FAILURE_KINDS, SimulationTimeout, run_simulation, time_limit
+from pymc_vcc.execution.outcomes import FAILURE_KINDS, SimulationTimeout, time_limit
 from pymc_vcc.inference.series import prepare_observed
+from pymc_vcc.inference.simulator import run_simulation
 from pymc_vcc.testing import AsDataset, GaussianLocation, Slow
 
 OBSERVED = prepare_observed(np.zeros((1, 10)), output_names=("y",))

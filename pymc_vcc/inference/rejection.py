@@ -30,7 +30,7 @@ import xarray as xr
 
 from pymc_vcc import __version__
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
-from pymc_vcc.execution.outcomes import FAILURE_KINDS, OK, crash_outcome, run_simulation
+from pymc_vcc.execution.outcomes import FAILURE_KINDS, OK, crash_outcome
 from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
 from pymc_vcc.execution.store import (
     SimulationRecord,
@@ -51,7 +51,7 @@ from pymc_vcc.inference.noise import (
 )
 from pymc_vcc.inference.priors import Prior, check_prior_support
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
-from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator
+from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator, run_simulation
 
 PILOT, MAIN = 0, 1
 PHASE_NAMES = ("pilot", "main")

@@ -37,12 +37,12 @@ def _generic_outcome(function: Callable[..., Any], rng, params, size) -> Simulat
     try:
         values = np.asarray(function(rng, *params, size), dtype=float)
     except Exception as exc:
-        reason = f"{type(exc).__name__}: {exc}"[:300]
-        return SimulationOutcome(None, "exception", reason, time.perf_counter() - start)
+        reason = f"{type(exc).__name__}: {exc}"
+        return SimulationOutcome.failed("exception", reason, time.perf_counter() - start)
     elapsed = time.perf_counter() - start
     if not np.isfinite(values).all():
         count = int((~np.isfinite(values)).sum())
-        return SimulationOutcome(None, "non-finite", f"{count} non-finite value(s)", elapsed)
+        return SimulationOutcome.failed("non-finite", f"{count} non-finite value(s)", elapsed)
     return SimulationOutcome(values, OK, "", elapsed)
 
 
