@@ -195,7 +195,7 @@ def test_failed_simulations_are_zero_likelihood_and_counted():
     total = stats_["simulations"].values.sum()
     assert failed == stats_["n_failed"]
     assert 0.15 < failed / total < 0.25  # the wrapper's failure rate
-    for kind in ("exception", "non-finite", "reported"):
+    for kind in ("exception", "non-finite", "solver"):
         assert kind in stats_.attrs["failure_kinds"]
     draws = idata.posterior["mu"].values.ravel()
     sd = exact.std() * np.sqrt(1 + epsilon**2)

@@ -1,21 +1,12 @@
 """A simulation's outcome: its outputs, or the kind and the reason of its failure.
 
 Nothing a simulation does is fatal to a sampler: every way it can go wrong becomes a
-:class:`SimulationOutcome` with a failure kind and a reason. Running a simulator into one
-(:func:`pymc_vcc.inference.simulator.run_simulation`) reports the kinds
-
-``exception``       the simulator raised (the reason names the exception)
-``time-limit``      the run took longer than its time limit (:func:`time_limit`; or a local
-                    worker process was stopped for it: see :mod:`pymc_vcc.execution.executors`)
-``reported``        the simulator returned a Dataset with ``attrs["status"] != "ok"``
-``invalid-output``  outputs missing or misshapen
-``non-finite``      NaN or infinite outputs
-
-and the executors one more, which :func:`crash_outcome` turns into an outcome:
-
-``worker-crash``    the worker process running it died (segfault, ``os._exit``, out of memory):
-                    reported by the executor as a
-                    :class:`~pymc_vcc.execution.executors.WorkerCrash`
+:class:`SimulationOutcome` with a :class:`~pymc_vcc.physics.failures.FailureKind` and a reason.
+Running a simulator into one is :func:`pymc_vcc.inference.simulator.run_simulation`
+(:func:`time_limit` stops it at its time limit); a worker process that died running it (or was
+stopped for its time limit: see :mod:`pymc_vcc.execution.executors`) is reported by the
+executor as a :class:`~pymc_vcc.execution.executors.WorkerCrash`, which :func:`crash_outcome`
+turns into an outcome.
 """
 
 from __future__ import annotations
@@ -29,18 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pymc_vcc.execution.worker_pool import TIME_LIMIT, WORKER_CRASH, WorkerCrash
+from pymc_vcc.execution.worker_pool import WorkerCrash
+from pymc_vcc.physics.failures import FailureKind
 
 OK = "ok"
-FAILURE_KINDS: tuple[str, ...] = (
-    "exception",
-    TIME_LIMIT,
-    "reported",
-    "invalid-output",
-    "non-finite",
-    WORKER_CRASH,
-)
-"""Every failure kind of a simulation, in a fixed order (see the module)."""
 
 _MAX_REASON_LENGTH = 300
 
@@ -59,7 +42,7 @@ class SimulationOutcome:
 
     Attributes:
         values: the outputs (n_outputs, n_time) when the run succeeded, else None.
-        status: ``"ok"`` or one of :data:`FAILURE_KINDS`.
+        status: ``"ok"`` or a :class:`~pymc_vcc.physics.failures.FailureKind`.
         reason: why it failed ("" when ok).
         elapsed: wall time of the simulator call, s.
     """
@@ -75,7 +58,7 @@ class SimulationOutcome:
         return self.status == OK
 
     @classmethod
-    def failed(cls, kind: str, reason: str, elapsed: float) -> SimulationOutcome:
+    def failed(cls, kind: FailureKind, reason: str, elapsed: float) -> SimulationOutcome:
         """A failed run's outcome, its reason cut to a readable length."""
         if len(reason) > _MAX_REASON_LENGTH:
             reason = reason[: _MAX_REASON_LENGTH - 3] + "..."

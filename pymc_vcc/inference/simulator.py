@@ -20,8 +20,8 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.outcomes import OK, SimulationOutcome, SimulationTimeout, time_limit
-from pymc_vcc.execution.worker_pool import TIME_LIMIT
 from pymc_vcc.inference.series import InvalidOutputError, ObservedData, OutputData, extract_outputs
+from pymc_vcc.physics.failures import FailureKind
 
 Bounds = dict[str, tuple[float, float]]
 
@@ -136,7 +136,9 @@ def run_simulation(
     time_limit_s: float | None = None,
 ) -> SimulationOutcome:
     """Run ``simulator(theta, rng)`` and return its outputs in ``observed``'s layout, or why not
-    (the failure kinds of :mod:`pymc_vcc.execution.outcomes`): nothing it does is fatal.
+    (a :class:`~pymc_vcc.physics.failures.FailureKind` and a reason): nothing it does is fatal.
+    A Dataset flagged ``attrs["status"] != "ok"`` fails with its ``attrs["failure_kind"]``
+    (``reported`` when it names none of the kinds).
 
     Args:
         simulator: the model, ``simulator(theta, rng) -> Dataset | array``.
@@ -151,30 +153,42 @@ def run_simulation(
             result = simulator(theta, rng)
     except SimulationTimeout:
         return SimulationOutcome.failed(
-            TIME_LIMIT, f"exceeded the time limit of {time_limit_s} s", time.perf_counter() - start
+            FailureKind.TIME_LIMIT,
+            f"exceeded the time limit of {time_limit_s} s",
+            time.perf_counter() - start,
         )
     except Exception as exc:
         return SimulationOutcome.failed(
-            "exception", f"{type(exc).__name__}: {exc}", time.perf_counter() - start
+            FailureKind.EXCEPTION, f"{type(exc).__name__}: {exc}", time.perf_counter() - start
         )
     elapsed = time.perf_counter() - start
     if time_limit_s is not None and elapsed > time_limit_s:
         return SimulationOutcome.failed(
-            TIME_LIMIT, f"took {elapsed:.3g} s, over the limit of {time_limit_s} s", elapsed
+            FailureKind.TIME_LIMIT,
+            f"took {elapsed:.3g} s, over the limit of {time_limit_s} s",
+            elapsed,
         )
     if isinstance(result, xr.Dataset):
         status = result.attrs.get("status", OK)
         if status != OK:
             reason = result.attrs.get("failure_reason") or f"status {status!r}"
-            return SimulationOutcome.failed("reported", str(reason), elapsed)
+            return SimulationOutcome.failed(_reported_kind(result), str(reason), elapsed)
     try:
         values = extract_outputs(result, observed)
     except (InvalidOutputError, TypeError, ValueError) as exc:
-        return SimulationOutcome.failed("invalid-output", str(exc), elapsed)
+        return SimulationOutcome.failed(FailureKind.INVALID_OUTPUT, str(exc), elapsed)
     finite = np.isfinite(values)
     if not finite.all():
         row = int(np.flatnonzero(~finite.all(axis=1))[0])
         count = int((~finite[row]).sum())
         reason = f"output {observed.names[row]!r} has {count} non-finite value(s)"
-        return SimulationOutcome.failed("non-finite", reason, elapsed)
+        return SimulationOutcome.failed(FailureKind.NON_FINITE, reason, elapsed)
     return SimulationOutcome(values, OK, "", elapsed)
+
+
+def _reported_kind(result: xr.Dataset) -> FailureKind:
+    """The kind a failed result names in ``attrs["failure_kind"]``; ``reported`` if none."""
+    try:
+        return FailureKind(result.attrs.get("failure_kind", ""))
+    except ValueError:
+        return FailureKind.REPORTED

@@ -29,6 +29,7 @@ from pytensor.tensor.type_other import NoneTypeT
 from pymc_vcc.execution.executors import Executor, WorkerCrash
 from pymc_vcc.execution.outcomes import OK, SimulationOutcome, crash_outcome
 from pymc_vcc.inference.pymc.model import SimulatorFunction
+from pymc_vcc.physics.failures import FailureKind
 
 
 def _generic_outcome(function: Callable[..., Any], rng, params, size) -> SimulationOutcome:
@@ -38,11 +39,13 @@ def _generic_outcome(function: Callable[..., Any], rng, params, size) -> Simulat
         values = np.asarray(function(rng, *params, size), dtype=float)
     except Exception as exc:
         reason = f"{type(exc).__name__}: {exc}"
-        return SimulationOutcome.failed("exception", reason, time.perf_counter() - start)
+        return SimulationOutcome.failed(FailureKind.EXCEPTION, reason, time.perf_counter() - start)
     elapsed = time.perf_counter() - start
     if not np.isfinite(values).all():
         count = int((~np.isfinite(values)).sum())
-        return SimulationOutcome.failed("non-finite", f"{count} non-finite value(s)", elapsed)
+        return SimulationOutcome.failed(
+            FailureKind.NON_FINITE, f"{count} non-finite value(s)", elapsed
+        )
     return SimulationOutcome(values, OK, "", elapsed)
 
 

@@ -255,7 +255,7 @@ class ParallelKernel:
                     self._finished.update((record.key, record) for record in finished)
         for record in records:
             if record.status != OK:
-                self.failure_kinds[record.status] += 1
+                self.failure_kinds[str(record.status)] += 1
                 if len(self.failure_reasons) < _MAX_REASONS:
                     self.failure_reasons.append(f"{record.status}: {record.reason}")
         failures = sum(record.status != OK for record in records)
