@@ -254,7 +254,8 @@ class Flaky:
 
     Failure modes, chosen evenly among ``modes`` by the same uniform draw: ``"raise"`` raises
     RuntimeError, ``"nan"`` and ``"inf"`` return outputs with a non-finite value, ``"status"``
-    returns a Dataset flagged ``attrs["status"] = "failed"`` as the VCC simulator does, and
+    returns a Dataset flagged ``attrs["status"] = "failed"`` of kind ``"solver"`` as the VCC
+    simulator does, and
     ``"stall"`` sleeps ``stall_seconds`` before answering (for time limits).
     """
 
@@ -292,7 +293,9 @@ class Flaky:
             return Slow(lambda theta, rng: outputs, self.stall_seconds, busy=False)(theta, rng)
         if mode == "status":
             dataset = as_dataset(outputs, self.output_names)
-            dataset.attrs.update(status="failed", failure_reason="synthetic solver failure")
+            dataset.attrs.update(
+                status="failed", failure_kind="solver", failure_reason="synthetic solver failure"
+            )
             return dataset
         broken = np.array(outputs, dtype=float)
         broken[..., 0] = np.nan if mode == "nan" else np.inf

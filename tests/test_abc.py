@@ -166,7 +166,7 @@ def test_failures_are_excluded_counted_and_explained():
     failures = dict(zip(stats_["failure_kind"].values, stats_["failures"].values, strict=True))
     assert int(stats_["n_failed"]) == (status != "ok").sum() == sum(failures.values())
     assert 0.2 < int(stats_["n_failed"]) / int(stats_["n_simulations"]) < 0.3
-    for kind in ("exception", "non-finite", "reported", "time-limit"):
+    for kind in ("exception", "non-finite", "solver", "time-limit"):
         assert failures[kind] > 0, kind
     reasons = set(stats_["sim_failure_reason"].values[status != "ok"])
     assert {"RuntimeError: synthetic failure", "synthetic solver failure"} <= reasons

@@ -8,9 +8,10 @@ import pymc as pm
 import pytest
 
 from pymc_vcc.inference.noise import SensorNoise
-from pymc_vcc.inference.pymc.laplace import GaussianReference, fit_reference
+from pymc_vcc.inference.pymc.laplace import fit_reference
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.model import add_simulator
+from pymc_vcc.inference.pymc.reference import GaussianReference
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.testing import as_dataset
 

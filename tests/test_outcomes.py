@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from pymc_vcc.execution.outcomes import FAILURE_KINDS, SimulationTimeout, run_simulation, time_limit
+from pymc_vcc.execution.outcomes import SimulationTimeout, time_limit
 from pymc_vcc.inference.series import prepare_observed
+from pymc_vcc.inference.simulator import run_simulation
+from pymc_vcc.physics.failures import FailureKind
 from pymc_vcc.testing import AsDataset, GaussianLocation, Slow
 
 OBSERVED = prepare_observed(np.zeros((1, 10)), output_names=("y",))
@@ -48,12 +50,22 @@ def test_a_good_run_gives_its_outputs_in_the_observed_layout():
             "Radau diverged",
         ),
         (_returning(xr.Dataset(attrs={"status": "timeout"})), "reported", "status 'timeout'"),
+        (
+            _returning(xr.Dataset(attrs={"status": "failed", "failure_kind": "solver"})),
+            "solver",
+            "status 'failed'",
+        ),
+        (
+            _returning(xr.Dataset(attrs={"status": "failed", "failure_kind": "gremlins"})),
+            "reported",
+            "status 'failed'",
+        ),
     ],
 )
 def test_failures_are_captured_with_kind_and_reason(simulator, kind, reason):
     outcome = run_simulation(simulator, {"mu": 0.0}, RNG, OBSERVED)
     assert not outcome.ok and outcome.values is None
-    assert outcome.status == kind and kind in FAILURE_KINDS
+    assert outcome.status == FailureKind(kind)
     assert reason in outcome.reason
 
 

@@ -201,7 +201,7 @@ def test_simulator_function_reports_failures_and_returns_nan_to_pytensor():
     observed = prepare_observed(base({"mu": 0.0}, np.random.default_rng(0)))
     function = SimulatorFunction(Flaky(base, rate=1.0, modes=("status",)), ("mu",), observed)
     outcome = function.outcome(np.random.default_rng(1), np.array([0.2]))
-    assert outcome.status == "reported"
+    assert outcome.status == "solver"
     assert "synthetic solver failure" in outcome.reason
     values = function(np.random.default_rng(1), np.array([[[0.2]]]), (1, 10))
     assert values.shape == (1, 10)

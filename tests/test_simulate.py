@@ -165,7 +165,7 @@ def test_failures_are_flagged_not_raised(unit, solver):
     )
     slow = simulate(unit, None, inputs, max_wall_time=1e-3, solver=solver)
     assert slow.attrs["status"] == "failed" and "wall-clock" in slow.attrs["failure_reason"]
-    assert slow.attrs["failure_kind"] == FailureKind.WALL_CLOCK
+    assert slow.attrs["failure_kind"] == FailureKind.TIME_LIMIT
     assert slow.sizes["time"] == 601 and np.isnan(slow.PD.values[-1])
     too_much = simulate(unit, {"M0": 9.0}, inputs, solver=solver)
     assert too_much.attrs["status"] == "failed"

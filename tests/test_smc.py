@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import multiprocessing
+
 import numpy as np
 import pymc as pm
 import pytest
 from pymc.smc.kernels import IMH, MH
 from scipy import stats
 
-from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.execution.executors import ProcessExecutor, available_cores, make_executor
 from pymc_vcc.inference.priors import GMMPrior
+from pymc_vcc.inference.pymc import smc
 from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import ParallelIMH, ParallelMH, sample_smc_abc
@@ -192,7 +195,7 @@ def test_failed_simulations_are_zero_likelihood_and_counted():
     total = stats_["simulations"].values.sum()
     assert failed == stats_["n_failed"]
     assert 0.15 < failed / total < 0.25  # the wrapper's failure rate
-    for kind in ("exception", "non-finite", "reported"):
+    for kind in ("exception", "non-finite", "solver"):
         assert kind in stats_.attrs["failure_kinds"]
     draws = idata.posterior["mu"].values.ravel()
     sd = exact.std() * np.sqrt(1 + epsilon**2)
@@ -241,6 +244,34 @@ def test_chains_run_one_after_another_with_the_executor():
     posterior = idata.posterior["mu"].values
     assert posterior.shape == (2, 60)
     assert not np.array_equal(posterior[0], posterior[1])
+
+
+def test_without_an_executor_the_kernel_simulates_on_every_core_and_closes_its_pool(
+    monkeypatch,
+):
+    opened = []  # held here: only the kernel's going can close its pool
+
+    class Recorded(ProcessExecutor):
+        def __init__(self) -> None:
+            super().__init__()
+            opened.append(self)
+
+    monkeypatch.setattr(smc, "ProcessExecutor", Recorded)
+    sim = GaussianLocation(n_time=10)
+    with pm.Model():
+        add_simulator("y", sim, sim({"mu": 0.0}, np.random.default_rng(0)), epsilon=0.5)
+        idata = pm.sample_smc(
+            draws=20,
+            kernel=ParallelIMH,
+            chains=2,
+            cores=1,
+            random_seed=0,
+            compute_convergence_checks=False,
+            **QUIET,
+        )
+    assert [executor.n_workers for executor in opened] == [available_cores()]  # for both chains
+    assert idata.sample_stats.attrs["executor"] == repr(opened[0])
+    assert not [p for p in multiprocessing.active_children() if p.name == "pymc_vcc-worker"]
 
 
 def test_kernel_needs_a_simulator_node_and_a_real_executor():

@@ -108,7 +108,7 @@ def test_failures_come_back_with_their_kind(method, capfd):
     _, failure = _solver(method).integrate(
         Linear(), Y0, 0.0, 2.0, t_out, late, time.perf_counter() - 1.0
     )
-    assert failure is not None and failure.kind == FailureKind.WALL_CLOCK
+    assert failure is not None and failure.kind == FailureKind.TIME_LIMIT
     assert "wall-clock limit" in failure.detail and np.isnan(late).all()
 
     states = np.full((2, 3), np.nan)

@@ -19,13 +19,13 @@ import pytest
 import xarray as xr
 
 from pymc_vcc.execution.executors import WorkerCrash, make_executor
-from pymc_vcc.execution.outcomes import FAILURE_KINDS, WORKER_CRASH
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.inference.sensitivity import sobol_indices
+from pymc_vcc.physics.failures import FailureKind
 from pymc_vcc.testing import GaussianLocation
 
 SEGFAULTS = {37, 211}
@@ -181,10 +181,10 @@ def test_abc_counts_crashes_as_failures_and_matches_the_serial_run(pool, tmp_pat
     status = stats["sim_status"].values
     doomed = CRASHING.doomed(crashed.prior["mu"].values.ravel())
     assert doomed.sum() == 3
-    np.testing.assert_array_equal(status == WORKER_CRASH, doomed)
-    assert list(stats["failure_kind"].values) == list(FAILURE_KINDS)
+    np.testing.assert_array_equal(status == FailureKind.WORKER_CRASH, doomed)
+    assert list(stats["failure_kind"].values) == list(FailureKind)
     failures = dict(zip(stats["failure_kind"].values, stats["failures"].values, strict=True))
-    assert failures[WORKER_CRASH] == doomed.sum() == int(stats["n_failed"])
+    assert failures[FailureKind.WORKER_CRASH] == doomed.sum() == int(stats["n_failed"])
     reasons = set(stats["sim_failure_reason"].values[doomed])
     assert reasons == {
         "worker process died (exit code -11 / signal SIGSEGV)",

@@ -38,15 +38,13 @@ from typing import Any
 
 import cloudpickle
 
+from pymc_vcc.physics.failures import FailureKind
+
 _FUNCTION_CACHE: dict[str, Callable[..., Any]] = {}
 _FUNCTION_CACHE_SIZE = 4
 _STOP_SECONDS = 5.0
 _AHEAD_BYTES = 4096  # a chunk message this small may wait in a busy worker's pipe (never blocks)
 _LOADED = "loaded"  # a worker's note that it has the chunk's function and starts its items
-
-
-WORKER_CRASH = "worker-crash"
-TIME_LIMIT = "time-limit"
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,7 +60,7 @@ class WorkerCrash:
 
     reason: str
     elapsed: float = 0.0
-    kind: str = WORKER_CRASH
+    kind: FailureKind = FailureKind.WORKER_CRASH
 
 
 class WorkerDiedError(Exception):
@@ -391,7 +389,7 @@ class WorkerPool:
             worker.process.kill()
             elapsed = now - job.started
             reason = f"stopped after {elapsed:.3g} s, over its time limit of {job.time_limit:.3g} s"
-            self._replace(worker, WorkerCrash(reason, elapsed, TIME_LIMIT))
+            self._replace(worker, WorkerCrash(reason, elapsed, FailureKind.TIME_LIMIT))
 
     def close(self) -> None:
         """Stop every worker (busy ones at once) and cancel queued chunks."""

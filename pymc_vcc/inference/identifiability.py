@@ -24,11 +24,10 @@ import pandas as pd
 import xarray as xr
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
-from pymc_vcc.execution.outcomes import run_simulation
 from pymc_vcc.inference.likelihood import innovations
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.series import ObservedData, prepare_observed
-from pymc_vcc.inference.simulator import Simulator, check_simulator
+from pymc_vcc.inference.simulator import Simulator, check_simulator, run_simulation
 
 NOT_IDENTIFIED = 0.5
 """A direction whose expected posterior sd exceeds this fraction of its prior sd is reported as

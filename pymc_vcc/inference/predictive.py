@@ -30,7 +30,6 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
-from pymc_vcc.execution.outcomes import run_simulation
 from pymc_vcc.inference.noise import (
     OutputNoise,
     SensorNoise,
@@ -39,7 +38,7 @@ from pymc_vcc.inference.noise import (
     sensor_parameter,
 )
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
-from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator
+from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator, run_simulation
 
 BANDS = ("lower", "median", "upper")
 

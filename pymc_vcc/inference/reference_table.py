@@ -32,7 +32,7 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
-from pymc_vcc.execution.outcomes import OK, crash_outcome, run_simulation
+from pymc_vcc.execution.outcomes import OK, crash_outcome
 from pymc_vcc.execution.output_folder import atomic_path
 from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
 from pymc_vcc.execution.store import (
@@ -58,7 +58,7 @@ from pymc_vcc.inference.rejection import (
     split_seed,
 )
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
-from pymc_vcc.inference.simulator import Simulator, check_simulator
+from pymc_vcc.inference.simulator import Simulator, check_simulator, run_simulation
 
 SETTINGS_FILE = "settings.json"
 

@@ -30,7 +30,7 @@ import xarray as xr
 
 from pymc_vcc import __version__
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
-from pymc_vcc.execution.outcomes import FAILURE_KINDS, OK, crash_outcome, run_simulation
+from pymc_vcc.execution.outcomes import OK, crash_outcome
 from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
 from pymc_vcc.execution.store import (
     SimulationRecord,
@@ -51,7 +51,8 @@ from pymc_vcc.inference.noise import (
 )
 from pymc_vcc.inference.priors import Prior, check_prior_support
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
-from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator
+from pymc_vcc.inference.simulator import Simulator, SimulatorInfo, check_simulator, run_simulation
+from pymc_vcc.physics.failures import FailureKind
 
 PILOT, MAIN = 0, 1
 PHASE_NAMES = ("pilot", "main")
@@ -147,7 +148,7 @@ class SimulationTask:
                     records[position] = record._replace(distance=float(value))
                 else:
                     records[position] = record._replace(
-                        status="non-finite", reason=f"distance is {value}"
+                        status=FailureKind.NON_FINITE, reason=f"distance is {value}"
                     )
         return records
 
@@ -374,7 +375,8 @@ def abc_rejection(
         An ArviZ DataTree with groups ``posterior`` (accepted θ, chain × draw), ``prior`` (every
         simulated θ), ``observed_data`` and ``sample_stats`` (distances of the accepted draws;
         per simulation: phase, distance, status, failure reason, elapsed time, acceptance; and
-        ε, counts, acceptance rate, failures by kind, wall time).
+        ε, counts, acceptance rate, ``failures`` over every ``failure_kind`` of
+        :class:`~pymc_vcc.physics.failures.FailureKind`, wall time).
 
     Raises:
         ValueError: bad settings or data, before any simulation.
@@ -546,7 +548,7 @@ def result_tree(
             "acceptance_rate_ok": ((), accepted.sum() / n_main_ok if n_main_ok else 0.0),
             "failures": (
                 "failure_kind",
-                [int((status == kind).sum()) for kind in FAILURE_KINDS],
+                [int((status == kind.value).sum()) for kind in FailureKind],
             ),
             "wall_time": ((), wall_time, {"units": "s"}),
         },
@@ -554,7 +556,7 @@ def result_tree(
             "chain": [0],
             "draw": np.arange(int(accepted.sum())),
             "simulation": np.arange(n_pilot + n_main_run),
-            "failure_kind": list(FAILURE_KINDS),
+            "failure_kind": [kind.value for kind in FailureKind],
         },
     )
     stats["acceptance_rate"].attrs["long_name"] = "accepted / main-phase simulations run"

@@ -25,11 +25,11 @@ from SALib.analyze import sobol as sobol_analyze
 from SALib.sample import sobol as sobol_sample
 
 from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
-from pymc_vcc.execution.outcomes import crash_outcome, run_simulation
+from pymc_vcc.execution.outcomes import crash_outcome
 from pymc_vcc.execution.store import ResultRecord, ResultStore
 from pymc_vcc.inference.priors import check_prior_support, validate_bounds
 from pymc_vcc.inference.series import OutputData, prepare_observed
-from pymc_vcc.inference.simulator import Simulator, check_simulator
+from pymc_vcc.inference.simulator import Simulator, check_simulator, run_simulation
 
 
 @dataclass(frozen=True)

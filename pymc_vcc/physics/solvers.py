@@ -82,7 +82,7 @@ class SegmentModel(Protocol):
 def _wall_clock_failure(limit: float, t: float) -> Failure:
     """The failure of a run stopped by its wall-clock ``limit`` (s) at model time ``t`` (s)."""
     return Failure(
-        FailureKind.WALL_CLOCK, f"wall-clock limit of {limit:.1f} s reached at t = {t:.1f} s"
+        FailureKind.TIME_LIMIT, f"wall-clock limit of {limit:.1f} s reached at t = {t:.1f} s"
     )
 
 

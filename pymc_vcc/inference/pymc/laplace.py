@@ -16,7 +16,7 @@ halves the effective sample size. Instead,
    negative Hessian there) is corrected along its principal axes by secants at ±2 sds, where
    the solver's own error no longer swamps weak directions, and widened by ``inflation``.
    Fits that end in the same mode are merged; the distinct modes make an equal-weight mixture,
-   the :class:`GaussianReference`.
+   the :class:`~pymc_vcc.inference.pymc.reference.GaussianReference`.
 3. SMC tempers from that reference ``q`` to the posterior (``sample_smc_abc(reference=q)``):
    ``π_β ∝ q^(1−β) (prior × likelihood)^β``, so ``β = 0`` is ``q``, drawn exactly, and
    ``β = 1`` the posterior. Importance weights and Metropolis–Hastings moves correct whatever
@@ -33,8 +33,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
-from functools import cached_property, partial
+from contextlib import closing
 from pathlib import Path
 from typing import Any
 
@@ -46,15 +45,15 @@ from pymc.pytensorf import compile as compile_pytensor
 from pymc.pytensorf import join_nonshared_inputs, make_shared_replacements
 from pytensor.gradient import hessian
 from scipy.optimize import least_squares
-from scipy.special import expit, logit, logsumexp
+from scipy.special import expit, logit
 from scipy.stats import chi2
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
-from pymc_vcc.execution.outcomes import SimulationOutcome, crash_outcome
-from pymc_vcc.execution.output_folder import atomic_path
+from pymc_vcc.execution.executors import Executor, ExecutorKind, executor_scope
+from pymc_vcc.execution.outcomes import SimulationOutcome
 from pymc_vcc.inference.likelihood import innovations
+from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest
 from pymc_vcc.inference.pymc.likelihood import LogLikelihoodKernel
-from pymc_vcc.inference.pymc.smc import BatchLikelihood, graph_digest, simulate_task
+from pymc_vcc.inference.pymc.reference import GaussianReference
 
 FIT_BOUND = 10.0
 """Largest |value| of a fitted coordinate: logit 10 is 4.5e-5 of a box's width from its edge."""
@@ -67,89 +66,6 @@ AXIS_REACH = 2.0
 
 FAILED_RESIDUAL = 1e3
 """Whitened residual given to every entry of a failed simulation: the fit steps back from it."""
-
-
-@dataclass(frozen=True)
-class GaussianReference:
-    """An equal-weight mixture of Gaussians over the model's value space (the flat vector of its
-    free variables' unconstrained values, in ``model.value_vars`` order), one per mode found,
-    and what finding them cost.
-
-    Attributes:
-        means, covariances: of the components, (K, d) and (K, d, d); one component may be
-            given as (d,) and (d, d).
-        simulations, failed_simulations: simulations the fit ran, and how many failed.
-        iterations: least-squares iterations over all starts.
-        costs: ½ Σ w² of the whitened residuals at each component's fit.
-    """
-
-    means: np.ndarray
-    covariances: np.ndarray
-    simulations: int = 0
-    failed_simulations: int = 0
-    iterations: int = 0
-    costs: tuple[float, ...] = ()
-
-    def __post_init__(self) -> None:
-        means = np.atleast_2d(np.asarray(self.means, dtype=float))
-        covariances = np.asarray(self.covariances, dtype=float)
-        if covariances.ndim == 2:
-            covariances = covariances[np.newaxis]
-        k, d = means.shape
-        if covariances.shape != (k, d, d) or not np.isfinite(covariances).all():
-            raise ValueError(
-                f"covariances must be {k} finite {d} x {d} matrices for {k} mean(s) of {d} "
-                f"values, got shape {covariances.shape}"
-            )
-        object.__setattr__(self, "means", means)
-        object.__setattr__(self, "covariances", covariances)
-        object.__setattr__(self, "costs", tuple(float(c) for c in self.costs))
-        np.linalg.cholesky(covariances)  # positive definite, or LinAlgError here
-
-    @cached_property
-    def _factors(self) -> np.ndarray:
-        return np.linalg.cholesky(self.covariances)
-
-    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """``n`` draws, (n, dimension), each component drawn with equal probability."""
-        component = rng.integers(len(self.means), size=n)
-        noise = rng.standard_normal(self.means[component].shape)
-        return self.means[component] + np.einsum("nij,nj->ni", self._factors[component], noise)
-
-    def logpdf(self, points: np.ndarray) -> np.ndarray:
-        """Log density at each row of ``points``."""
-        points = np.atleast_2d(points)
-        per_component = []
-        for mean, factor in zip(self.means, self._factors, strict=True):
-            whitened = np.linalg.solve(factor, (points - mean).T)
-            log_det = 2.0 * np.log(np.diag(factor)).sum()
-            per_component.append(
-                -0.5 * (np.sum(whitened**2, axis=0) + log_det + mean.size * np.log(2 * np.pi))
-            )
-        return logsumexp(per_component, axis=0) - np.log(len(self.means))
-
-    def digest(self) -> str:
-        """Digest of the mean and covariance (a checkpoint names the reference it sampled)."""
-        return hashlib.sha256(self.means.tobytes() + self.covariances.tobytes()).hexdigest()
-
-    def save(self, path: str | Path, fingerprint: str) -> None:
-        """Write as JSON (atomically), with the ``fingerprint`` of the fit that made it."""
-        payload = {**asdict(self), "fingerprint": fingerprint}
-        payload["means"], payload["covariances"] = self.means.tolist(), self.covariances.tolist()
-        with atomic_path(path) as temporary:
-            temporary.write_text(json.dumps(payload))
-
-    @classmethod
-    def load(cls, path: str | Path, fingerprint: str) -> GaussianReference | None:
-        """The reference saved at ``path`` by a fit with this ``fingerprint``; None if there is
-        none or it came from another fit."""
-        path = Path(path)
-        if not path.is_file():
-            return None
-        payload = json.loads(path.read_text())
-        if payload.pop("fingerprint", None) != fingerprint:
-            return None
-        return cls(**payload)
 
 
 class _Residuals:
@@ -185,18 +101,10 @@ class _Residuals:
             n_nodes = self.likelihood.n_nodes
             tasks = self.likelihood.tasks(fresh, self.seed.spawn(len(fresh) * n_nodes))
             outcomes: list[SimulationOutcome | None] = [None] * len(tasks)
-            chunks = self.executor.imap_chunks(
-                partial(simulate_task, self.likelihood.functions),
-                tasks,
-                time_limit=self.likelihood.time_limit,
-            )
-            try:
+            with closing(self.likelihood.run(self.executor, tasks)) as chunks:
                 for chunk in chunks:
-                    for position, result in chunk:
-                        crashed = isinstance(result, WorkerCrash)
-                        outcomes[position] = crash_outcome(result) if crashed else result
-            finally:
-                chunks.close()
+                    for position, outcome in chunk:
+                        outcomes[position] = outcome
             self.simulations += len(tasks)
             for index, key in enumerate(todo):
                 per_node = [outcomes[node * len(todo) + index] for node in range(n_nodes)]
@@ -254,7 +162,8 @@ def fit_reference(
             and settings loads it instead of fitting again.
 
     Returns:
-        The :class:`GaussianReference`, with the fits' simulations and failures counted.
+        The :class:`~pymc_vcc.inference.pymc.reference.GaussianReference`, with the fits'
+        simulations and failures counted.
     """
     if not inflation >= 1.0:
         raise ValueError(f"inflation must be >= 1, got {inflation}")
@@ -422,4 +331,4 @@ def _along_axes(
     return mean + vectors @ shift, (vectors * new_sds**2) @ vectors.T
 
 
-__all__ = ["GaussianReference", "fit_reference"]
+__all__ = ["fit_reference"]

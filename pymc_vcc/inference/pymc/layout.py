@@ -108,7 +108,19 @@ def observed_outputs(model: Model) -> xr.Dataset:
 
 
 def standard_layout(tree: xr.DataTree, model: Model) -> xr.DataTree:
-    """``tree`` from ``pm.sample_smc`` on ``model`` in the layout described in the module."""
+    """A result of ``pm.sample_smc`` in the layout of the project's samplers (see the module).
+
+    :func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc` returns it so; a result of
+    ``pm.sample_smc(kernel=ParallelIMH)`` (or of PyMC's own kernels) needs this call.
+
+    Args:
+        tree: the DataTree ``pm.sample_smc`` returned (left unchanged).
+        model: the model it sampled.
+
+    Returns:
+        A copy with ``sample_stats`` over ``(chain, stage)`` with the simulation totals, and
+        ``observed_data`` one variable per output with units.
+    """
     result = tree.copy()
     if "sample_stats" in result.children:
         stats = result["sample_stats"].to_dataset()

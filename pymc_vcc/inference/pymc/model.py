@@ -33,7 +33,7 @@ from pytensor.graph.basic import Apply, Variable
 from pytensor.graph.op import Op
 from pytensor.tensor.variable import TensorVariable
 
-from pymc_vcc.execution.outcomes import SimulationOutcome, run_simulation
+from pymc_vcc.execution.outcomes import SimulationOutcome
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import (
     NOISE_PREFIX,
@@ -49,7 +49,7 @@ from pymc_vcc.inference.noise import (
 )
 from pymc_vcc.inference.priors import Bounds, GMMPrior, Prior, UniformPrior, check_prior_support
 from pymc_vcc.inference.series import ObservedData, OutputData, prepare_observed
-from pymc_vcc.inference.simulator import Simulator, check_simulator
+from pymc_vcc.inference.simulator import Simulator, check_simulator, run_simulation
 
 
 def gaussian_log_kernel(distance: np.ndarray | float, epsilon: float) -> np.ndarray:

@@ -49,164 +49,40 @@ import hashlib
 import logging
 import time
 import warnings
+import weakref
 from collections import Counter
-from collections.abc import Callable, Sequence
-from functools import partial
+from collections.abc import Callable
+from contextlib import closing
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import pymc as pm
-import pytensor.tensor as pt
 from pymc.blocking import DictToArrayBijection
 from pymc.distributions.simulator import SimulatorRV
 from pymc.model import Model, modelcontext
-from pymc.pytensorf import compile as compile_pytensor
-from pymc.pytensorf import floatX, join_nonshared_inputs, make_shared_replacements
+from pymc.pytensorf import floatX
 from pymc.smc.kernels import IMH, MH, Pearson
-from pytensor.graph.basic import Constant
-from pytensor.graph.traversal import ancestors
-from pytensor.tensor.type_other import NoneTypeT
 from xarray import DataTree
 
 from pymc_vcc.execution.executors import (
     Executor,
     ExecutorKind,
+    ProcessExecutor,
     SerialExecutor,
-    WorkerCrash,
     executor_scope,
 )
-from pymc_vcc.execution.outcomes import OK, SimulationOutcome, crash_outcome
+from pymc_vcc.execution.outcomes import OK
 from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore, describe_callable
+from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest
 from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import DistanceKernel, SimulatorFunction
+from pymc_vcc.inference.pymc.reference import GaussianReference
 from pymc_vcc.inference.samplers import SMC_KERNELS, SmcKernel
-
-if TYPE_CHECKING:
-    from pymc_vcc.inference.pymc.laplace import GaussianReference
 
 logger = logging.getLogger(__name__)
 
 _MAX_REASONS = 5
-
-
-def _generic_outcome(function: Callable[..., Any], rng, params, size) -> SimulationOutcome:
-    """Run a ``pm.Simulator`` random function, capturing exceptions and non-finite outputs."""
-    start = time.perf_counter()
-    try:
-        values = np.asarray(function(rng, *params, size), dtype=float)
-    except Exception as exc:
-        reason = f"{type(exc).__name__}: {exc}"[:300]
-        return SimulationOutcome(None, "exception", reason, time.perf_counter() - start)
-    elapsed = time.perf_counter() - start
-    if not np.isfinite(values).all():
-        count = int((~np.isfinite(values)).sum())
-        return SimulationOutcome(None, "non-finite", f"{count} non-finite value(s)", elapsed)
-    return SimulationOutcome(values, OK, "", elapsed)
-
-
-def simulate_task(functions: Sequence[Callable[..., Any]], task: tuple) -> SimulationOutcome:
-    """Worker side: one simulation of one ``pm.Simulator`` node, with its own random stream."""
-    node, seed, size, params = task
-    function = functions[node]
-    rng = np.random.default_rng(seed)
-    if isinstance(function, SimulatorFunction):
-        return function.outcome(rng, *params)
-    return _generic_outcome(function, rng, params, None if size is None else tuple(size))
-
-
-class BatchLikelihood:
-    """The model's likelihood with its ``pm.Simulator`` nodes evaluated outside PyTensor.
-
-    Compiles two functions of the flat particle vector (in the order of ``value_vars``): the
-    random-function inputs (size and parameters) of every simulator node, and the total
-    log-likelihood given the simulated outputs of every node (distance kernels, plus the
-    log-probability of any other observed variable and of potentials).
-    """
-
-    def __init__(self, model: Model, value_vars: list, compile_kwargs: dict | None) -> None:
-        nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
-        if not nodes:
-            raise ValueError(
-                "the model has no pm.Simulator node; the parallel kernels batch simulations only "
-                "(use pm.sample_smc's default kernel for models with ordinary likelihoods)"
-            )
-        others = [rv for rv in model.observed_RVs if rv not in nodes]
-        self.functions = tuple(type(rv.owner.op).fn for rv in nodes)
-        self.n_nodes = len(nodes)
-        limits = [getattr(fn, "time_limit_s", None) for fn in self.functions]
-        self.time_limit = max((limit for limit in limits if limit is not None), default=None)
-
-        node_inputs: list = []
-        self._slices = []
-        for rv in nodes:
-            size = rv.owner.op.size_param(rv.owner)
-            if size is None or isinstance(size.type, NoneTypeT):
-                size = pt.constant(np.zeros(0, dtype="int64"))  # no size: an empty vector
-            params = list(rv.owner.op.dist_params(rv.owner))
-            first = len(node_inputs)
-            node_inputs += [size, *params]
-            self._slices.append(slice(first, len(node_inputs)))
-        node_inputs = model.replace_rvs_by_values(node_inputs)
-
-        terms = []
-        for rv in nodes:
-            op = rv.owner.op
-            observed = model.rvs_to_values[rv]
-            placeholder = rv.type()
-            term = pt.sum(op.distance(op.epsilon, op.sum_stat(observed), op.sum_stat(placeholder)))
-            terms.append((term, placeholder))
-        other_terms = model.logp(vars=others) if others else pt.constant(0.0)
-        rest = other_terms + model.potentiallogp
-
-        point = model.initial_point()
-        shared = make_shared_replacements(point, value_vars, model)
-        outputs, flat = join_nonshared_inputs(
-            point, [rest, *(term for term, _ in terms), *node_inputs], value_vars, shared
-        )
-        kwargs = {**(compile_kwargs or {}), "on_unused_input": "ignore"}
-        self._rest = compile_pytensor([flat], outputs[0], **kwargs)
-        self._terms = [
-            compile_pytensor([flat, placeholder], outputs[1 + node], **kwargs)
-            for node, (_, placeholder) in enumerate(terms)
-        ]
-        self._inputs = compile_pytensor([flat], outputs[1 + self.n_nodes :], **kwargs)
-        for function in (self._rest, *self._terms, self._inputs):
-            function.trust_input = True
-        self._dtypes = [rv.type.dtype for rv in nodes]
-
-    def tasks(self, points: np.ndarray, seeds: Sequence[np.random.SeedSequence]) -> list[tuple]:
-        """One task (node, seed, size, params) per node and point, node-major."""
-        inputs = [self._inputs(point) for point in points]
-        tasks = []
-        for node, where in enumerate(self._slices):
-            for index, values in enumerate(inputs):
-                size, *params = values[where]
-                seed = seeds[node * len(points) + index]
-                tasks.append((node, seed, None if size.size == 0 else size, params))
-        return tasks
-
-    def term(self, node: int, point: np.ndarray, outcome: SimulationOutcome) -> float:
-        """The log-likelihood term of one simulation of ``node`` at ``point``; NaN if failed."""
-        if not outcome.ok:
-            return np.nan
-        values = np.asarray(outcome.values, dtype=self._dtypes[node])
-        return float(self._terms[node](point, values))
-
-    def evaluate(self, points: np.ndarray, terms: np.ndarray, ok: np.ndarray) -> np.ndarray:
-        """Log-likelihood of each point from its nodes' terms (node-major, as the tasks); −inf
-        where any simulation failed."""
-        n = len(points)
-        terms = terms.reshape(self.n_nodes, n)
-        ok = ok.reshape(self.n_nodes, n).all(axis=0)
-        loglik = np.full(n, -np.inf)
-        for index in np.flatnonzero(ok):
-            total = terms[0, index]
-            for node in range(1, self.n_nodes):
-                total = total + terms[node, index]
-            loglik[index] = total + float(self._rest(points[index]))
-        loglik[np.isnan(loglik)] = -np.inf
-        return loglik
 
 
 def _simulation_key(point: np.ndarray, node: int, seed: np.random.SeedSequence) -> str:
@@ -250,7 +126,9 @@ class ParallelKernel:
 
     Args:
         executor: where simulations run, an executor of :mod:`pymc_vcc.execution.executors`
-            (the caller opens and closes it); None runs them in this process.
+            (the caller opens and closes it); None: local worker processes on every core
+            (``make_executor("processes")``), opened at the first simulation, kept for every
+            chain of the run and closed with the kernel (when ``pm.sample_smc`` returns).
         checkpoint: an open :class:`~pymc_vcc.execution.store.LikelihoodStore` (the caller opens
             and closes it, fingerprinting the run: :func:`sample_smc_abc` does): each finished
             simulation is persisted there, and one already there is not run again.
@@ -285,7 +163,7 @@ class ParallelKernel:
                 f"(make_executor(...)) or None, "
                 f"got {type(executor).__name__}; sample_smc_abc also accepts a kind name"
             )
-        self.executor: Executor = SerialExecutor() if executor is None else executor
+        self.executor = executor
         self.checkpoint = checkpoint
         self._finished: dict[str, LikelihoodRecord] = {}
         self._likelihood = BatchLikelihood(
@@ -315,7 +193,7 @@ class ParallelKernel:
                 "pymc_vcc.inference.pymc.smc.sample_smc_abc)"
             )
         state = self.__dict__.copy()
-        if not isinstance(self.executor, SerialExecutor):
+        if self.executor is not None and not isinstance(self.executor, SerialExecutor):
             warnings.warn(
                 "pm.sample_smc runs chains in separate (daemonic) processes here (cores > 1 and "
                 "chains > 1); they cannot use the executor, so each chain simulates its "
@@ -335,6 +213,14 @@ class ParallelKernel:
         self._finished = self.checkpoint.load() if self.checkpoint is not None else {}
         super().initialize(start, rng)
 
+    def _workers(self) -> Executor:
+        """The executor simulating: the caller's, else a pool on every core, opened now and
+        closed when this kernel is gone."""
+        if self.executor is None:
+            self.executor = ProcessExecutor()
+            weakref.finalize(self, self.executor.close)
+        return self.executor
+
     def _simulated_loglik(self, points: np.ndarray, prior_logp: np.ndarray) -> np.ndarray:
         """Log-likelihood of points, simulating (in one batch) only those the prior allows and
         the checkpoint does not hold yet."""
@@ -351,20 +237,13 @@ class ParallelKernel:
         ]
         records: list[LikelihoodRecord | None] = [self._finished.get(key) for key in keys]
         todo = [number for number, record in enumerate(records) if record is None]
-        chunks = self.executor.imap_chunks(
-            partial(simulate_task, self._likelihood.functions),
-            (tasks[number] for number in todo),
-            time_limit=self._likelihood.time_limit,
-        )
-        try:
+        with closing(self._likelihood.run(self._workers(), [tasks[n] for n in todo])) as chunks:
             for chunk in chunks:
                 finished = []
-                for position, result in chunk:
+                for position, outcome in chunk:
                     number = todo[position]
-                    outcome = crash_outcome(result) if isinstance(result, WorkerCrash) else result
-                    term = self._likelihood.term(
-                        tasks[number][0], batch[number % len(batch)], outcome
-                    )
+                    point = batch[number % len(batch)]
+                    term = self._likelihood.term(tasks[number][0], point, outcome)
                     finished.append(
                         LikelihoodRecord(
                             keys[number], term, outcome.status, outcome.reason, outcome.elapsed
@@ -374,11 +253,9 @@ class ParallelKernel:
                 if self.checkpoint is not None:
                     self.checkpoint.append(finished)
                     self._finished.update((record.key, record) for record in finished)
-        finally:
-            chunks.close()
         for record in records:
             if record.status != OK:
-                self.failure_kinds[record.status] += 1
+                self.failure_kinds[str(record.status)] += 1
                 if len(self.failure_reasons) < _MAX_REASONS:
                     self.failure_reasons.append(f"{record.status}: {record.reason}")
         failures = sum(record.status != OK for record in records)
@@ -506,9 +383,11 @@ class ParallelIMH(ParallelKernel, IMH):
     """PyMC's independent Metropolis–Hastings SMC kernel (proposals from a Gaussian fitted to
     the particles) with the simulations of all particles run as one parallel batch.
 
-    Use it as ``pm.sample_smc(kernel=ParallelIMH, executor=ex, chains=1, ...)`` on a model
-    with ``pm.Simulator`` nodes (e.g. from :func:`pymc_vcc.inference.pymc.model.add_simulator`), or
-    through :func:`sample_smc_abc`, which picks defaults suited to expensive simulators. Its
+    Use it as ``pm.sample_smc(kernel=ParallelIMH, chains=1, ...)`` on a model with
+    ``pm.Simulator`` nodes (e.g. from :func:`pymc_vcc.inference.pymc.model.add_simulator`):
+    without ``executor=`` its simulations run on every core; ``standard_layout(result, model)``
+    (:func:`~pymc_vcc.inference.pymc.layout.standard_layout`) gives the result the layout of
+    :func:`sample_smc_abc`, which runs it with defaults suited to expensive simulators. Its
     arguments are those of :class:`ParallelKernel`.
     """
 
@@ -555,18 +434,6 @@ KERNELS: dict[str, type[ParallelKernel]] = dict(
     zip(SMC_KERNELS, (ParallelIMH, ParallelMH), strict=True)
 )
 """The parallel kernel of each name in :data:`~pymc_vcc.inference.samplers.SMC_KERNELS`."""
-
-
-def graph_digest(variables: Sequence) -> str:
-    """Digest of the graphs computing ``variables``: their operations and constants."""
-    digest = hashlib.sha256()
-    for variable in ancestors(variables):
-        if isinstance(variable, Constant):
-            data = np.asarray(variable.data)
-            digest.update(str(data).encode() if data.dtype == object else data.tobytes())
-        elif variable.owner is not None:
-            digest.update(str(variable.owner.op).encode())
-    return digest.hexdigest()
 
 
 def _describe(function: Callable[..., Any]) -> str:
