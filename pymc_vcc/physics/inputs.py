@@ -1,8 +1,8 @@
 """Input profiles of a cycle: valve opening, compressor speed, ambient and indoor temperature.
 
-Each cycle model declares the inputs it reads (:attr:`~pymc_vcc.physics.cycles.base.CycleModel
-.inputs`); this module knows them through :data:`~pymc_vcc.physics.cycles.INPUTS`, every input
-some cycle reads. An input profile is an ``xarray.Dataset`` over ``time`` (s, starting at 0,
+Each cycle model declares the inputs it reads
+(:attr:`~pymc_vcc.physics.cycles.base.CycleModel.inputs`); this module knows them through
+:data:`~pymc_vcc.physics.cycles.INPUTS`, every input some cycle reads. An input profile is an ``xarray.Dataset`` over ``time`` (s, starting at 0,
 strictly increasing) with one variable per input, SI units in their ``units`` attrs. Values are
 held
 constant from one time to the next (zero-order hold, as the step profiles of the paper's Fig. 4);

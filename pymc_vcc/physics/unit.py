@@ -27,6 +27,7 @@ from pymc_vcc.physics.cycles.base import (
     CycleModel,
     Discretisation,
     InputLayout,
+    is_fraction,
 )
 from pymc_vcc.physics.parameters import ParameterIds, ParameterSpec, ParameterTable, parameter_table
 from pymc_vcc.physics.solvers import METHODS
@@ -184,7 +185,7 @@ def _section(source: str, section: str, cls: type, raw: Any) -> Any:
             value = float(value)
             if not math.isfinite(value) or value <= 0.0:
                 raise ValueError(f"{key}: expected a finite positive number, got {value!r}")
-            if f.metadata.get("fraction") and value >= 1.0:
+            if is_fraction(f) and value >= 1.0:
                 raise ValueError(f"{key}: expected a fraction in (0, 1), got {value!r}")
         values[f.name] = value
     return cls(**values)

@@ -21,7 +21,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections import namedtuple
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import Field, dataclass
 from enum import StrEnum
 from typing import Any, ClassVar, Protocol
 
@@ -57,6 +57,15 @@ BLOCK_UNITS = {
     BlockKind.INTEGRAL: "kg s",
 }
 """The SI unit of each kind of state block."""
+
+
+FRACTION = {"fraction": True}
+"""Metadata of a hardware section's field (``field(metadata=FRACTION)``) that must lie in (0, 1)."""
+
+
+def is_fraction(section_field: Field) -> bool:
+    """Whether a hardware section's field was declared with :data:`FRACTION`."""
+    return bool(section_field.metadata.get("fraction"))
 
 
 @dataclass(frozen=True)
@@ -311,7 +320,7 @@ class CycleModel(ABC):
     hardware: ClassVar[type]
     """A frozen dataclass with one field per section of the unit file that this cycle adds to
     the common ones (``[discretisation]``, ``[solver]``, ``[controller]``, ``[rating]``), each a
-    frozen dataclass of numbers (SI; a field whose metadata has ``fraction`` must lie in
+    frozen dataclass of numbers (SI; a field declared with :data:`FRACTION` must lie in
     (0, 1)). The unit loader reads and checks them; :meth:`constants` reads them."""
     parameters: ClassVar[ParameterIds]
     """(id, unit) of the calibration parameters a unit of this cycle must give."""

@@ -33,6 +33,7 @@ from pymc_vcc.physics.components.heat_transfer import FLUX_KINKS, cell_heat
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
 from pymc_vcc.physics.cycles.base import (
+    FRACTION,
     InputLayout,
     InputSpec,
     OutputLayout,
@@ -42,9 +43,6 @@ from pymc_vcc.physics.cycles.base import (
 )
 from pymc_vcc.physics.records import record_array
 from pymc_vcc.physics.refrigerant import saturation_state, state, state_values_at
-
-FRACTION = {"fraction": True}
-"""Metadata of a section field that must lie in (0, 1)."""
 
 
 @dataclass(frozen=True)
