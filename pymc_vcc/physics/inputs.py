@@ -2,13 +2,13 @@
 
 Each cycle model declares the inputs it reads
 (:attr:`~pymc_vcc.physics.cycles.base.CycleModel.inputs`); this module knows them through
-:data:`~pymc_vcc.physics.cycles.INPUTS`, every input some cycle reads. An input profile is an ``xarray.Dataset`` over ``time`` (s, starting at 0,
-strictly increasing) with one variable per input, SI units in their ``units`` attrs. Values are
-held
-constant from one time to the next (zero-order hold, as the step profiles of the paper's Fig. 4);
-the last time is the end of the profile. CSV files (:func:`load_inputs_csv`) carry a time
-column and one column per input, in any unit of the right kind (``degC``, ``%``, ``rpm``, ...),
-given in the header (``T_ambient [degC]``), in a row of units under it, or SI for a bare name.
+:data:`~pymc_vcc.physics.cycles.INPUTS`, every input some cycle reads. An input profile is an
+``xarray.Dataset`` over ``time`` (s, starting at 0, strictly increasing) with one variable per
+input, SI units in their ``units`` attrs. Values are held constant from one time to the next
+(zero-order hold, as the step profiles of the paper's Fig. 4); the last time is the end of the
+profile. CSV files (:func:`load_inputs_csv`) carry a time column and one column per input, in
+any unit of the right kind (``degC``, ``%``, ``rpm``, ...), given in the header
+(``T_ambient [degC]``), in a row of units under it, or SI for a bare name.
 """
 
 from __future__ import annotations
