@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections import namedtuple
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import Field, dataclass
 from enum import StrEnum
 from typing import Any, ClassVar, Protocol
@@ -162,7 +162,7 @@ class InputLayout:
                 return spec
         raise KeyError(f"unknown input {input_id!r}; inputs are {list(self.ids)}")
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[InputSpec]:
         return iter(self.specs)
 
     def __len__(self) -> int:
