@@ -24,6 +24,7 @@ def test_builtin_unit_loads_with_its_numbers():
 def test_round_trip_through_dict():
     unit = load_unit()
     assert unit_from_dict(unit_to_dict(unit)) == unit
+    assert hash(unit_from_dict(unit_to_dict(unit))) == hash(unit)  # a unit is hashable
 
 
 def test_load_from_a_file(tmp_path):

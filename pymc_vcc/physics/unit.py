@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import MISSING, dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 from typing import Any, get_type_hints
@@ -113,7 +113,7 @@ class Unit:
     solver: SolverSettings
     controller: ControllerSettings
     hardware: Any
-    rating: dict[str, float]
+    rating: dict[str, float] = field(hash=False)  # compared, but a unit stays hashable
     parameters: ParameterTable
 
     @property
