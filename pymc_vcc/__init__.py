@@ -16,7 +16,7 @@ __version__ = "0.1.0"
 _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.physics.refrigerant": ("load_refrigerant", "Refrigerant", "SUPPORTED_FLUIDS"),
     "pymc_vcc.physics.unit": ("load_unit", "Unit"),
-    "pymc_vcc.physics.parameters": ("PARAMETER_IDS", "ParameterSpec", "ParameterTable"),
+    "pymc_vcc.physics.parameters": ("ParameterSpec", "ParameterTable"),
     "pymc_vcc.physics.inputs": (
         "INPUT_IDS",
         "builtin_inputs",

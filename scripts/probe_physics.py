@@ -19,7 +19,6 @@ import numpy as np
 from pymc_vcc.physics.inputs import builtin_inputs
 from pymc_vcc.physics.probes import (
     OSCILLATION_LIMIT,
-    air_ranges,
     charge_observability,
     check_draw,
     parameter_effects,
@@ -39,7 +38,7 @@ def box(draws: int, seed: int, workers: int) -> None:
     print(f"first law held in {sum(r.first_law for r in ok)}/{len(ok)}")
     print(f"second law held in {sum(r.second_law for r in ok)}/{len(ok)}")
     print(f"air flows and fan powers in range in {sum(r.air_in_range for r in ok)}/{len(ok)}")
-    for name, (low, high) in air_ranges(unit).items():
+    for name, (low, high) in unit.cycle_model.box_ranges(unit).items():
         print(f"  {name}: [{low:g}, {high:g}]")
     still = [r.oscillation for r in ok]
     print(

@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from pymc_vcc.physics.cycles import CYCLE_MODELS, cycle_model
-from pymc_vcc.physics.cycles.base import Block, BlockKind, StateLayout
+from pymc_vcc.physics.cycles.base import (
+    Block,
+    BlockKind,
+    InputLayout,
+    InputSpec,
+    OutputLayout,
+    StateLayout,
+)
 from pymc_vcc.physics.refrigerant import load_refrigerant
 from pymc_vcc.physics.unit import HEAT_PUMP_UNIT, load_unit
 
@@ -65,6 +72,28 @@ def test_layout_zones_and_errors():
         layout.start("x")
 
 
+def test_input_and_output_layouts_name_every_offset():
+    outputs = OutputLayout(
+        {"TA": ("a temperature", "K")},
+        {"M": ("mass", "kg"), "W": ("a power", "W")},
+        optional=("W",),
+    )
+    assert (outputs.offsets.TA, outputs.offsets.M, outputs.offsets.W) == (0, 1, 2)
+    assert outputs.size == 3 and outputs.output_ids == ("TA",)
+    assert outputs.measurable_info == {"TA": ("a temperature", "K"), "W": ("a power", "W")}
+    with pytest.raises(ValueError, match="optional outputs must be diagnostics"):
+        OutputLayout({"TA": ("a", "K")}, {}, optional=("TA",))
+    with pytest.raises(ValueError, match="both outputs and diagnostics"):
+        OutputLayout({"TA": ("a", "K")}, {"TA": ("a", "K")})
+    speed = InputSpec("speed", "a speed", "Hz", 10.0, 150.0)
+    humidity = InputSpec("rh", "a humidity", "1", 0.0, 1.0, default=0.0)
+    inputs = InputLayout([speed, humidity])
+    assert inputs.required_ids == ("speed",) and inputs.defaults == {"rh": 0.0}
+    assert inputs.offsets.rh == 1 and inputs["speed"] is speed
+    with pytest.raises(ValueError, match="required inputs come before the optional ones"):
+        InputLayout([humidity, speed])
+
+
 def test_unknown_cycle_is_a_clear_error():
     with pytest.raises(ValueError, match="unknown cycle 'chiller'; allowed cycles are"):
         cycle_model("chiller")
@@ -94,15 +123,14 @@ def test_mass_changes_only_by_the_controller_source(setup):
     dydt = np.empty(y.size)
     out = np.empty(model.n_eval)
     assert model.evaluate(y, inputs, c, tables, dydt, out)
-    names = [*model.output_info, *model.diagnostic_info]
-    source = out[names.index("mdot_src")]
+    source = out[model.outputs.offsets.mdot_src]
     assert abs(source) > 1e-5
     eps = 1e-3
     rate = (
         model.total_mass(y + eps * dydt, c, tables) - model.total_mass(y - eps * dydt, c, tables)
     ) / (2 * eps)
     # exact up to the finite difference: a millionth of the compressor flow
-    assert rate == pytest.approx(source, abs=1e-6 * out[names.index("MDOT")])
+    assert rate == pytest.approx(source, abs=1e-6 * out[model.outputs.offsets.MDOT])
 
 
 def test_controller_switch_and_gains(setup):

@@ -26,7 +26,8 @@ def points(unit):
 def test_the_unit_names_its_cycle_and_the_indoor_coil_condenses(unit):
     assert unit.cycle == "heat-pump-heating" and unit.cycle_model.capacity == "Q_cond"
     cooling = load_unit()
-    assert unit.condenser == cooling.evaporator and unit.evaporator == cooling.condenser
+    assert unit.hardware.condenser == cooling.hardware.evaporator
+    assert unit.hardware.evaporator == cooling.hardware.condenser
 
 
 def test_mass_is_held_over_the_winter_day(unit):
@@ -61,7 +62,7 @@ def test_colder_outdoors_lowers_evaporating_pressure_and_capacity(unit, points):
     for T, point in points.items():  # the outdoor coil evaporates below the outdoor air
         assert saturation_state(tables, point["PE"])[0] < T + 273.15
     # the indoor coil condenses above the indoor air
-    assert saturation_state(tables, rated["PC"])[0] > unit.rating.T_indoor + 10.0
+    assert saturation_state(tables, rated["PC"])[0] > unit.rating["T_indoor"] + 10.0
 
 
 def test_faster_compressor_heats_more(unit, points):

@@ -5,14 +5,17 @@ from importlib.resources import files
 import numpy as np
 import pytest
 
-from pymc_vcc.physics.parameters import PARAMETER_IDS, ParameterSpec, parameter_table
+from pymc_vcc.physics.cycles.split_unit import PARAMETERS
+from pymc_vcc.physics.parameters import ParameterSpec, parameter_table
 from pymc_vcc.physics.unit import load_unit
 
 
 def test_table_iii_has_26_unique_ids_starting_with_charge():
-    assert len(PARAMETER_IDS) == 26
-    assert len(set(PARAMETER_IDS)) == 26
-    assert PARAMETER_IDS[0] == "M0"
+    ids = [pid for pid, _ in PARAMETERS]
+    assert len(ids) == 26
+    assert len(set(ids)) == 26
+    assert ids[0] == "M0"
+    assert load_unit().parameters.ids == tuple(ids)
 
 
 def test_builtin_bounds_are_those_of_table_iii():
@@ -51,13 +54,13 @@ def test_specs_are_checked_against_the_cycle_models_ids(changes, message):
     values = {"id": "M0", "name": "charge", "unit": "kg", "low": 0.9, "high": 2.2, "nominal": 1.3}
     specs["M0"] = ParameterSpec(**(values | changes))
     with pytest.raises(ValueError, match=message):
-        parameter_table(specs.values())
+        parameter_table(specs.values(), PARAMETERS)
 
 
 def test_missing_parameter_is_named():
     specs = [spec for spec in load_unit().parameters if spec.id != "CF_LEV"]
     with pytest.raises(ValueError, match="CF_LEV"):
-        parameter_table(specs)
+        parameter_table(specs, PARAMETERS)
 
 
 def test_vector_fills_nominal_and_checks_ids_and_bounds():
@@ -76,7 +79,7 @@ def test_vector_fills_nominal_and_checks_ids_and_bounds():
 def test_uniform_draws_stay_in_the_box():
     table = load_unit().parameters
     draws = table.sample_uniform(50, np.random.default_rng(1))
-    values = np.array([[d[pid] for pid in PARAMETER_IDS] for d in draws])
+    values = np.array([[d[pid] for pid in table.ids] for d in draws])
     assert np.all(values >= table.lows) and np.all(values <= table.highs)
     assert values.std(axis=0).min() > 0
 

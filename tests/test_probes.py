@@ -9,7 +9,6 @@ import pytest
 
 from pymc_vcc.physics.probes import (
     OSCILLATION_LIMIT,
-    air_ranges,
     box_probe,
     charge_observability,
     check_draw,
@@ -35,7 +34,7 @@ def test_noise_in_engineering_terms():
 
 
 def test_air_ranges_follow_the_box(unit):
-    ranges = air_ranges(unit)
+    ranges = unit.cycle_model.box_ranges(unit)
     assert ranges["V_air_out"] == (0.5, 1.5) and ranges["V_air_in"] == (0.1, 0.8)
     assert ranges["W_fans"] == (100.0, 1000.0)
 

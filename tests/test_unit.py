@@ -17,13 +17,14 @@ def test_builtin_unit_loads_with_its_numbers():
     unit = load_unit()
     assert unit.refrigerant == "R410A"
     assert unit.discretisation.n_volumes >= 5
-    assert unit.liquid_line.inner_diameter == pytest.approx(4.83e-3)
+    assert unit.hardware.liquid_line.inner_diameter == pytest.approx(4.83e-3)
     assert len(unit.parameters) == 26
 
 
 def test_round_trip_through_dict():
     unit = load_unit()
     assert unit_from_dict(unit_to_dict(unit)) == unit
+    assert hash(unit_from_dict(unit_to_dict(unit))) == hash(unit)  # a unit is hashable
 
 
 def test_load_from_a_file(tmp_path):
@@ -50,6 +51,15 @@ def _mutated(mutate):
         (lambda d: d["suction_tank"].update(volume=-1.0), "finite positive"),
         (lambda d: d["compressor"].update(isentropic_efficiency=1.2), r"fraction in \(0, 1\)"),
         (lambda d: d["controller"].update(enabled="yes"), "true or false"),
+        (
+            lambda d: d["rating"].update(T_ambient=400.0),
+            r"\[rating\] T_ambient: 400.0 K is outside the allowed range \[253.15, 323.15\]",
+        ),
+        (
+            lambda d: d["rating"].pop("T_indoor"),
+            r"\[rating\]: missing value\(s\) for \['T_indoor'\]",
+        ),
+        (lambda d: d["rating"].update(fan=1.0), r"\[rating\]: unknown key\(s\) \['fan'\]"),
         (lambda d: d["parameters"]["M0"].update(bounds=[2.2, 0.9]), "low < high"),
         (lambda d: d["parameters"]["M0"].update(nominal=3.0), "outside its bounds"),
         (lambda d: d["parameters"]["M0"].pop("nominal"), r"missing value\(s\) for \['nominal'\]"),
@@ -111,9 +121,20 @@ def test_the_worked_example_of_models_readme_loads_and_runs():
     from pymc_vcc.physics.simulate import operating_point
 
     unit = load_unit(Path(__file__).parents[1] / "models" / "r32_heat_pump_3kw.toml")
-    assert (unit.cycle, unit.refrigerant, unit.condenser.n_paths) == ("heat-pump-heating", "R32", 3)
+    assert (unit.cycle, unit.refrigerant, unit.hardware.condenser.n_paths) == (
+        "heat-pump-heating",
+        "R32",
+        3,
+    )
     point = operating_point(unit, T_ambient=275.15)
     assert point["status"] == "ok" and 2000.0 < point["capacity"] < 4500.0
+
+
+def test_the_rating_gives_the_cycles_inputs_optional_ones_too():
+    data = _builtin_dict()
+    assert set(unit_from_dict(data).rating) == set(load_unit().cycle_model.inputs.required_ids)
+    data["rating"]["RH_indoor"] = 0.5
+    assert unit_from_dict(data).rating["RH_indoor"] == 0.5
 
 
 def test_a_unit_without_a_cycle_runs_the_split_cooling_cycle():

@@ -51,8 +51,8 @@ import pint
 import xarray as xr
 
 from pymc_vcc.io.plausibility import check_plausible
-from pymc_vcc.physics.cycles import MEASURABLE_OUTPUT_INFO
-from pymc_vcc.physics.inputs import CYCLE_INPUT_IDS, INPUT_IDS, make_inputs
+from pymc_vcc.physics.cycles import INPUTS, MEASURABLE_OUTPUT_INFO
+from pymc_vcc.physics.inputs import INPUT_IDS, make_inputs
 
 EXAMPLE_LOG = "example_log.csv"
 """File name of the example field log inside ``pymc_vcc/data``."""
@@ -60,36 +60,25 @@ EXAMPLE_LOG = "example_log.csv"
 ATMOSPHERIC_PRESSURE = 101325.0
 """Default ambient pressure added to gauge pressures, Pa."""
 
-STEPPED_INPUTS: tuple[str, ...] = ("valve_opening", "compressor_speed")
-"""Inputs a controller sets in steps: resampled by nearest sample, and held without averaging
-across a step (each step starts a new hold block)."""
+STEPPED_INPUTS: tuple[str, ...] = tuple(spec.id for spec in INPUTS if spec.stepped)
+"""Inputs a controller sets in steps (the split unit's valve opening and compressor speed):
+resampled by nearest sample, and held without averaging across a step (each step starts a new
+hold block)."""
 
-_QUANTITY: dict[str, str] = {
-    "valve_opening": "fraction",
-    "compressor_speed": "speed",
-    "T_ambient": "temperature",
-    "T_indoor": "temperature",
-    "RH_indoor": "fraction",
-    "TD": "temperature",
-    "PD": "pressure",
-    "TS": "temperature",
-    "PS": "pressure",
-    "TC": "temperature",
-    "PC": "pressure",
-    "TE": "temperature",
-    "PE": "pressure",
-    "MDOT": "mass_flow",
-    "W_comp": "power",
+QUANTITY_OF_UNIT: dict[str, str] = {
+    "K": "temperature",
+    "Pa": "pressure",
+    "kg/s": "mass_flow",
+    "1": "fraction",
+    "Hz": "speed",
+    "W": "power",
 }
-"""The physical quantity of every input and output id."""
+"""The physical quantity (as :func:`unit_converter` names it) of each SI unit an input or output
+is declared in."""
 
 _SI_UNIT = {
-    "temperature": "K",
-    "pressure": "Pa",
-    "mass_flow": "kg/s",
-    "fraction": "dimensionless",
-    "speed": "Hz",
-    "power": "W",
+    quantity: "dimensionless" if unit == "1" else unit
+    for unit, quantity in QUANTITY_OF_UNIT.items()
 }
 _EXAMPLES = {
     "temperature": "K, degC, °C, C, degF, °F, F",
@@ -580,11 +569,11 @@ def load_measurements(
     if decimal not in (None, ".", ","):
         raise ValueError(f"decimal must be '.' or ',' (or None to infer it), got {decimal!r}")
     ids = list(columns.values())
-    known = set(CYCLE_INPUT_IDS) | set(MEASURABLE_OUTPUT_INFO)
+    known = set(INPUTS.ids) | set(MEASURABLE_OUTPUT_INFO)
     unknown = [name for name in ids if name not in known]
     if unknown:
         raise ValueError(
-            f"columns map to unknown id(s) {unknown}; allowed are {list(CYCLE_INPUT_IDS)} "
+            f"columns map to unknown id(s) {unknown}; allowed are {list(INPUTS.ids)} "
             f"(inputs) and {list(MEASURABLE_OUTPUT_INFO)} (outputs)"
         )
     repeated = sorted({name for name in ids if ids.count(name) > 1})
@@ -593,7 +582,7 @@ def load_measurements(
     missing_inputs = [name for name in INPUT_IDS if name not in ids]
     if missing_inputs:
         raise ValueError(f"columns must map a file column to every input; missing {missing_inputs}")
-    inputs_read = tuple(name for name in CYCLE_INPUT_IDS if name in ids)
+    inputs_read = tuple(name for name in INPUTS.ids if name in ids)
     outputs = tuple(name for name in MEASURABLE_OUTPUT_INFO if name in ids)
     if not outputs:
         raise ValueError(f"columns must map at least one output of {list(MEASURABLE_OUTPUT_INFO)}")
@@ -632,7 +621,9 @@ def load_measurements(
             or _split_header_unit(file_column)[1]
             or table.units_row.get(file_column)
         )
-        quantity = _QUANTITY[variable]
+        quantity = QUANTITY_OF_UNIT[
+            INPUTS[variable].unit if variable in INPUTS.ids else MEASURABLE_OUTPUT_INFO[variable][1]
+        ]
         if unit is None:
             raise ValueError(
                 f"{path}: no unit for column {column!r} ({variable}); give units={{{column!r}: "

@@ -50,7 +50,8 @@ def check_plausible(output: str, column: str, values_si: np.ndarray, declared_un
     """Refuse a measured ``output`` whose median (SI) is implausible for a cycle.
 
     Args:
-        output: the output id (inputs and unknown ids are not checked).
+        output: the output id (inputs, unknown ids and outputs in a unit without a range in
+            :data:`PLAUSIBLE_SI` are not checked).
         column: the file column, for the message.
         values_si: the column's values converted to SI (NaN for missing ones).
         declared_unit: the unit the column was declared in.
@@ -61,6 +62,8 @@ def check_plausible(output: str, column: str, values_si: np.ndarray, declared_un
     if output not in MEASURABLE_OUTPUT_INFO:
         return
     si_unit = MEASURABLE_OUTPUT_INFO[output][1]
+    if si_unit not in PLAUSIBLE_SI:
+        return
     low, high = PLAUSIBLE_SI[si_unit]
     finite = np.asarray(values_si, dtype=float)
     finite = finite[np.isfinite(finite)]

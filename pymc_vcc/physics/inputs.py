@@ -1,11 +1,14 @@
-"""Input profiles of the cycle: valve opening, compressor speed, ambient and indoor temperature.
+"""Input profiles of a cycle: valve opening, compressor speed, ambient and indoor temperature.
 
-An input profile is an ``xarray.Dataset`` over ``time`` (s, starting at 0, strictly increasing)
-with the four variables of :data:`INPUTS`, SI units in their ``units`` attrs. Values are held
-constant from one time to the next (zero-order hold, as the step profiles of the paper's Fig. 4);
-the last time is the end of the profile. CSV files (:func:`load_inputs_csv`) carry a time
-column and one column per input, in any unit of the right kind (``degC``, ``%``, ``rpm``, ...),
-given in the header (``T_ambient [degC]``), in a row of units under it, or SI for a bare name.
+Each cycle model declares the inputs it reads
+(:attr:`~pymc_vcc.physics.cycles.base.CycleModel.inputs`); this module knows them through
+:data:`~pymc_vcc.physics.cycles.INPUTS`, every input some cycle reads. An input profile is an
+``xarray.Dataset`` over ``time`` (s, starting at 0, strictly increasing) with one variable per
+input, SI units in their ``units`` attrs. Values are held constant from one time to the next
+(zero-order hold, as the step profiles of the paper's Fig. 4); the last time is the end of the
+profile. CSV files (:func:`load_inputs_csv`) carry a time column and one column per input, in
+any unit of the right kind (``degC``, ``%``, ``rpm``, ...), given in the header
+(``T_ambient [degC]``), in a row of units under it, or SI for a bare name.
 """
 
 from __future__ import annotations
@@ -13,13 +16,15 @@ from __future__ import annotations
 import csv
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
+
+from pymc_vcc.physics.cycles import INPUTS
+from pymc_vcc.physics.cycles.base import InputLayout
 
 BUILTIN_PROFILE = "fig4_steps.csv"
 """File name of the built-in 2120 s step profile inside ``pymc_vcc/data``."""
@@ -29,40 +34,9 @@ WINTER_PROFILE = "winter_day_steps.csv"
 indoor 20 to 22 °C, the compressor faster when it is colder."""
 
 
-@dataclass(frozen=True)
-class InputSpec:
-    """One input: id, long name, SI unit and the physically allowed range [low, high]."""
-
-    id: str
-    name: str
-    unit: str
-    low: float
-    high: float
-
-
-INPUTS: tuple[InputSpec, ...] = (
-    InputSpec("valve_opening", "Expansion valve opening", "1", 0.02, 1.0),
-    InputSpec("compressor_speed", "Compressor speed", "Hz", 10.0, 150.0),
-    InputSpec("T_ambient", "Outdoor (ambient) air temperature", "K", 253.15, 323.15),
-    InputSpec("T_indoor", "Indoor air temperature", "K", 283.15, 313.15),
-)
-"""The four inputs in the order the cycle reads them."""
-
-INPUT_IDS: tuple[str, ...] = tuple(spec.id for spec in INPUTS)
-"""Ids of the four required inputs, in order: ``valve_opening`` (fraction), ``compressor_speed``
-(Hz), ``T_ambient`` and ``T_indoor`` (K)."""
-
-OPTIONAL_INPUTS: tuple[tuple[InputSpec, float], ...] = (
-    (InputSpec("RH_indoor", "Indoor relative humidity", "1", 0.0, 1.0), 0.0),
-)
-"""Inputs a profile may carry, with the value used when it does not (RH 0: dry indoor air, as
-in the paper; with RH > 0 the indoor coil dehumidifies where it is below the dew point)."""
-
-CYCLE_INPUT_IDS: tuple[str, ...] = INPUT_IDS + tuple(spec.id for spec, _ in OPTIONAL_INPUTS)
-"""Every input the cycle reads, in order: the four required, then the optional ones."""
-
-_ALL_INPUTS = INPUTS + tuple(spec for spec, _ in OPTIONAL_INPUTS)
-_DEFAULTS = {spec.id: default for spec, default in OPTIONAL_INPUTS}
+INPUT_IDS: tuple[str, ...] = INPUTS.required_ids
+"""Ids of the inputs every cycle requires, in order: ``valve_opening`` (fraction),
+``compressor_speed`` (Hz), ``T_ambient`` and ``T_indoor`` (K)."""
 
 _CELSIUS_OFFSET = 273.15
 
@@ -81,23 +55,24 @@ def make_inputs(time: ArrayLike, **values: ArrayLike) -> xr.Dataset:
     """
     time = np.asarray(time, dtype=float)
     data_vars = {}
-    for spec in _ALL_INPUTS:
+    for spec in INPUTS:
         if spec.id not in values:
-            if spec.id in _DEFAULTS:
+            if spec.id in INPUTS.defaults:
                 continue
             raise ValueError(f"input {spec.id!r} is missing; required inputs are {INPUT_IDS}")
         array = np.broadcast_to(np.asarray(values[spec.id], dtype=float), time.shape)
         data_vars[spec.id] = ("time", array.copy(), {"units": spec.unit, "long_name": spec.name})
-    unknown = sorted(set(values) - set(CYCLE_INPUT_IDS))
+    unknown = sorted(set(values) - set(INPUTS.ids))
     if unknown:
-        raise ValueError(f"unknown input(s) {unknown}; allowed inputs are {CYCLE_INPUT_IDS}")
+        raise ValueError(f"unknown input(s) {unknown}; allowed inputs are {INPUTS.ids}")
     dataset = xr.Dataset(data_vars, coords={"time": ("time", time, {"units": "s"})})
     validate_inputs(dataset)
     return dataset
 
 
-def validate_inputs(inputs: xr.Dataset) -> None:
-    """Raise ``ValueError`` naming the problem if ``inputs`` is not a valid input profile."""
+def validate_inputs(inputs: xr.Dataset, layout: InputLayout = INPUTS) -> None:
+    """Raise ``ValueError`` naming the problem if ``inputs`` is not a valid input profile of the
+    inputs ``layout`` (a cycle model's ``inputs``; default: of any cycle)."""
     if not isinstance(inputs, xr.Dataset):
         raise ValueError(f"inputs must be an xarray.Dataset, got {type(inputs).__name__}")
     if "time" not in inputs.coords:
@@ -118,13 +93,15 @@ def validate_inputs(inputs: xr.Dataset) -> None:
     time_units = inputs["time"].attrs.get("units", "s")
     if time_units != "s":
         raise ValueError(f"inputs: time units must be 's', got {time_units!r}")
-    missing = [pid for pid in INPUT_IDS if pid not in inputs.data_vars]
+    missing = [pid for pid in layout.required_ids if pid not in inputs.data_vars]
     if missing:
-        raise ValueError(f"inputs: missing variable(s) {missing}; required are {INPUT_IDS}")
-    unknown = sorted(str(name) for name in set(inputs.data_vars) - set(CYCLE_INPUT_IDS))
+        raise ValueError(
+            f"inputs: missing variable(s) {missing}; required are {layout.required_ids}"
+        )
+    unknown = sorted(str(name) for name in set(inputs.data_vars) - set(layout.ids))
     if unknown:
-        raise ValueError(f"inputs: unknown variable(s) {unknown}; allowed are {CYCLE_INPUT_IDS}")
-    for spec in _ALL_INPUTS:
+        raise ValueError(f"inputs: unknown variable(s) {unknown}; allowed are {layout.ids}")
+    for spec in layout:
         if spec.id not in inputs.data_vars:
             continue
         variable = inputs[spec.id]
@@ -145,16 +122,6 @@ def validate_inputs(inputs: xr.Dataset) -> None:
                 f"is outside the allowed range [{spec.low}, {spec.high}]"
             )
 
-
-_QUANTITY = {
-    "valve_opening": "fraction",
-    "compressor_speed": "speed",
-    "T_ambient": "temperature",
-    "T_indoor": "temperature",
-    "RH_indoor": "fraction",
-}
-"""The physical quantity of each input, as :func:`pymc_vcc.io.measurements.unit_converter`
-names it."""
 
 _CELSIUS = ("degC", "°C", "C", "℃", "celsius")
 _SECONDS_PER = {"s": 1.0, "sec": 1.0, "second": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
@@ -177,17 +144,17 @@ def _split_header_unit(column: str) -> tuple[str, str | None]:
 def _converter(unit: str, input_id: str, source: str) -> Callable[[np.ndarray], np.ndarray]:
     """Values in ``unit`` to the SI unit of ``input_id``: SI and °C directly, anything else
     (``%``, ``rpm``, ``degF``, ...) with pint, as the measured-log reader converts."""
-    spec = next(spec for spec in _ALL_INPUTS if spec.id == input_id)
+    spec = INPUTS[input_id]
     if unit == spec.unit:
         return lambda values: values
     if spec.unit == "K" and unit in _CELSIUS:
         return lambda values: values + _CELSIUS_OFFSET
     if spec.unit == "1" and unit == "%":
         return lambda values: values / 100.0
-    from pymc_vcc.io.measurements import unit_converter  # pint, only for other units
+    from pymc_vcc.io.measurements import QUANTITY_OF_UNIT, unit_converter  # pint: other units
 
     try:
-        return unit_converter(unit, _QUANTITY[input_id])
+        return unit_converter(unit, QUANTITY_OF_UNIT[spec.unit])
     except ValueError as error:
         raise ValueError(f"{source}: column {input_id}: {error}") from None
 
@@ -311,11 +278,9 @@ def _inputs_from_csv_text(
 
     given = dict(units or {})
     mapping = dict(columns or {})
-    unknown_ids = sorted(set(mapping.values()) - set(CYCLE_INPUT_IDS))
+    unknown_ids = sorted(set(mapping.values()) - set(INPUTS.ids))
     if unknown_ids:
-        raise ValueError(
-            f"columns map to unknown input(s) {unknown_ids}; allowed are {CYCLE_INPUT_IDS}"
-        )
+        raise ValueError(f"columns map to unknown input(s) {unknown_ids}; allowed are {INPUTS.ids}")
 
     def find(column: str) -> int | None:
         if column in header:
@@ -338,9 +303,9 @@ def _inputs_from_csv_text(
         for index, name in enumerate(names):
             if index == time_index:
                 continue
-            if name not in CYCLE_INPUT_IDS:
+            if name not in INPUTS.ids:
                 raise ValueError(
-                    f"{source}: unknown input column {name!r}; allowed are {CYCLE_INPUT_IDS} "
+                    f"{source}: unknown input column {name!r}; allowed are {INPUTS.ids} "
                     "(or map file columns to them with columns=)"
                 )
             selected[name] = index
@@ -378,8 +343,7 @@ def _inputs_from_csv_text(
         )
     values = {}
     for input_id, index in selected.items():
-        spec = next(spec for spec in _ALL_INPUTS if spec.id == input_id)
-        convert = _converter(unit_of(index) or spec.unit, input_id, source)
+        convert = _converter(unit_of(index) or INPUTS[input_id].unit, input_id, source)
         values[input_id] = convert(numbers(index))
     try:
         return make_inputs(numbers(time_index) * seconds, **values)
@@ -403,46 +367,26 @@ def builtin_inputs(name: str = BUILTIN_PROFILE) -> xr.Dataset:
     return _inputs_from_csv_text(text, name)
 
 
-def constant_inputs(
-    duration: float,
-    *,
-    valve_opening: float,
-    compressor_speed: float,
-    T_ambient: float,
-    T_indoor: float,
-    **optional: float,
-) -> xr.Dataset:
-    """A profile holding the inputs constant for ``duration`` seconds (SI units); ``optional``
-    may set the optional inputs (``RH_indoor``).
+def constant_inputs(duration: float, **values: float) -> xr.Dataset:
+    """A profile holding the inputs constant for ``duration`` seconds (SI units).
 
     Parameters
     ----------
     duration
         Length of the profile, s.
-    valve_opening
-        Expansion valve opening, fraction of full opening (0.02 to 1).
-    compressor_speed
-        Compressor speed, Hz (10 to 150).
-    T_ambient
-        Outdoor air temperature, K.
-    T_indoor
-        Indoor air temperature, K.
-    **optional
-        ``RH_indoor``: indoor relative humidity, fraction (default 0, dry air).
+    **values
+        One value per input, SI: the split unit's ``valve_opening`` (fraction of full opening,
+        0.02 to 1), ``compressor_speed`` (Hz, 10 to 150), ``T_ambient`` and ``T_indoor`` (K),
+        optionally ``RH_indoor`` (fraction, default 0: dry air).
     """
-    return make_inputs(
-        np.array([0.0, float(duration)]),
-        valve_opening=valve_opening,
-        compressor_speed=compressor_speed,
-        T_ambient=T_ambient,
-        T_indoor=T_indoor,
-        **optional,
-    )
+    return make_inputs(np.array([0.0, float(duration)]), **values)
 
 
-def input_segments(inputs: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
+def input_segments(
+    inputs: xr.Dataset, layout: InputLayout = INPUTS
+) -> tuple[np.ndarray, np.ndarray]:
     """Break points and held values: ``(edges, values)`` with ``values[k]`` (ordered as
-    :data:`CYCLE_INPUT_IDS`, absent optional inputs at their default) held on
+    ``layout``, a cycle model's ``inputs``, absent optional inputs at their default) held on
     ``[edges[k], edges[k + 1])``; rows that repeat the previous values are merged, so the solver
     restarts only where an input really steps."""
     time = np.asarray(inputs["time"].values, dtype=float)
@@ -450,8 +394,8 @@ def input_segments(inputs: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
         [
             np.asarray(inputs[pid].values, dtype=float)
             if pid in inputs.data_vars
-            else np.full(time.size, _DEFAULTS[pid])
-            for pid in CYCLE_INPUT_IDS
+            else np.full(time.size, layout.defaults[pid])
+            for pid in layout.ids
         ]
     )
     keep = [0] + [k for k in range(1, time.size - 1) if np.any(table[k] != table[k - 1])]

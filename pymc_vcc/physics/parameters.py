@@ -1,7 +1,8 @@
-"""Calibration parameters: ids, long names, units, bounds, and the paper's Table III.
+"""Calibration parameters: ids, long names, units, bounds.
 
 The physics reads parameters by their stable short id (``M0``, ``CF_VOL``, ...). Each cycle
-model declares the ids and units it expects (the split unit's are the 26 of Table III); a unit
+model declares the ids and units it expects (the split unit's are the 26 of the paper's Table
+III, :data:`pymc_vcc.physics.cycles.split_unit.PARAMETERS`); a unit
 description (``models/*.toml``) gives each id its long name, unit, bounds and nominal value, and
 this module checks them against the model and turns user parameter mappings into vectors.
 """
@@ -12,39 +13,6 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
-
-TABLE_III: tuple[tuple[str, str], ...] = (
-    ("M0", "kg"),
-    ("CF_VOL", "1"),
-    ("CF_POW", "1"),
-    ("CF_PREF", "1"),
-    ("CF_SHELL", "1"),
-    ("CF_LEV", "1"),
-    ("CF_DPC", "1"),
-    ("CF_DPE", "1"),
-    ("HTC_CV", "W/(m2 K)"),
-    ("HTC_CTP", "W/(m2 K)"),
-    ("HTC_CL", "W/(m2 K)"),
-    ("HTC_EV", "W/(m2 K)"),
-    ("HTC_ETP", "W/(m2 K)"),
-    ("HTC_EL", "W/(m2 K)"),
-    ("FO_FLOW", "m3/s"),
-    ("FO_POW", "W"),
-    ("FO_SPEED", "Hz"),
-    ("FI_FLOW", "m3/s"),
-    ("FI_POW", "W"),
-    ("FI_SPEED", "Hz"),
-    ("HTC_CA", "W/(m2 K)"),
-    ("HTC_EA", "W/(m2 K)"),
-    ("L_COND", "m"),
-    ("L_EVAP", "m"),
-    ("L_VAP", "m"),
-    ("L_LIQ", "m"),
-)
-"""(id, unit) of the 26 calibration parameters in the order of the paper's Table III."""
-
-PARAMETER_IDS: tuple[str, ...] = tuple(pid for pid, _ in TABLE_III)
-"""Parameter ids in Table III order; the index of an id is its position in parameter vectors."""
 
 ParameterIds = tuple[tuple[str, str], ...]
 """(id, unit) of the parameters a cycle model expects, in vector order."""
@@ -114,7 +82,7 @@ class ParameterSpec:
 @dataclass(frozen=True)
 class ParameterTable:
     """The ordered parameter specs of a unit: exactly the ids and units of ``expected`` (its
-    cycle model's parameters; Table III by default), in that order.
+    cycle model's parameters), in that order.
 
     Attributes
     ----------
@@ -125,7 +93,7 @@ class ParameterTable:
     """
 
     specs: tuple[ParameterSpec, ...]
-    expected: ParameterIds = TABLE_III
+    expected: ParameterIds
 
     def __post_init__(self) -> None:
         ids = tuple(spec.id for spec in self.specs)
@@ -206,11 +174,9 @@ class ParameterTable:
         return [dict(zip(self.ids, map(float, row), strict=True)) for row in draws]
 
 
-def parameter_table(
-    entries: Iterable[ParameterSpec], expected: ParameterIds = TABLE_III
-) -> ParameterTable:
-    """Build a :class:`ParameterTable` of the ``expected`` ids (default: Table III), sorted into
-    their order; unknown and missing ids are errors naming them."""
+def parameter_table(entries: Iterable[ParameterSpec], expected: ParameterIds) -> ParameterTable:
+    """Build a :class:`ParameterTable` of the ``expected`` ids (a cycle model's parameters),
+    sorted into their order; unknown and missing ids are errors naming them."""
     specs = {spec.id: spec for spec in entries}
     ids = [pid for pid, _ in expected]
     unknown = [pid for pid in specs if pid not in ids]

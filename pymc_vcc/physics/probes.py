@@ -24,9 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.physics.cycles import OUTPUT_IDS, OUTPUT_INFO
-from pymc_vcc.physics.cycles.split_unit import DIAGNOSTIC_INFO
-from pymc_vcc.physics.inputs import INPUT_IDS, constant_inputs
+from pymc_vcc.physics.cycles import QUANTITY_INFO
+from pymc_vcc.physics.inputs import constant_inputs
 from pymc_vcc.physics.sensors import KIND_OF_UNITS, RELATIVE_KINDS, TYPICAL_NOISE
 from pymc_vcc.physics.simulate import simulate
 from pymc_vcc.physics.unit import Unit, load_unit
@@ -47,7 +46,7 @@ share a busy machine (the box probe keeps the unit's own limit, which samplers f
 
 def noise_sd(output: str, value: np.ndarray | float) -> np.ndarray:
     """Sensor noise standard deviation of ``output`` at ``value`` (SI)."""
-    kind = KIND_OF_UNITS[{**OUTPUT_INFO, **DIAGNOSTIC_INFO}[output][1]]
+    kind = KIND_OF_UNITS[QUANTITY_INFO[output][1]]
     reading = np.asarray(value, dtype=float)
     if kind in RELATIVE_KINDS:
         return TYPICAL_NOISE[kind] * np.abs(reading)
@@ -55,7 +54,8 @@ def noise_sd(output: str, value: np.ndarray | float) -> np.ndarray:
 
 
 def separation(first: xr.Dataset, second: xr.Dataset) -> dict[str, float]:
-    """Per output, the time-averaged |difference| of two runs in noise standard deviations."""
+    """Per output of the runs, the time-averaged |difference| of two runs in noise standard
+    deviations."""
     return {
         name: float(
             np.mean(
@@ -63,13 +63,13 @@ def separation(first: xr.Dataset, second: xr.Dataset) -> dict[str, float]:
                 / noise_sd(name, first[name].values)
             )
         )
-        for name in OUTPUT_IDS
+        for name in map(str, first.data_vars)
     }
 
 
 def rated_inputs(unit: Unit, duration: float) -> xr.Dataset:
     """The unit's rating point held for ``duration`` s."""
-    return constant_inputs(duration, **{name: getattr(unit.rating, name) for name in INPUT_IDS})
+    return constant_inputs(duration, **unit.rating)
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,7 @@ class DrawReport:
     failure_reason: str
     first_law: bool  # electrical power >= power to the refrigerant at every output time
     second_law: bool  # power to the refrigerant >= isentropic power at every output time
-    air_in_range: bool  # air flows and fan powers inside the ranges the box implies
+    air_in_range: bool  # diagnostics inside the ranges the box implies (the cycle's box_ranges)
     oscillation: float  # peak-to-peak PC over the last window / PC
     mass_error: float  # max |M - M0| / M0
 
@@ -98,21 +98,6 @@ class DrawReport:
         )
 
 
-def air_ranges(unit: Unit) -> dict[str, tuple[float, float]]:
-    """Air flow (m³/s) and fan power (W) ranges over the box, by the fan laws at each fan's
-    running speed (``speed_fraction`` of its rated speed)."""
-    table = unit.parameters
-    out, ind = unit.outdoor_fan.speed_fraction, unit.indoor_fan.speed_fraction
-    return {
-        "V_air_out": (table["FO_FLOW"].low * out, table["FO_FLOW"].high * out),
-        "V_air_in": (table["FI_FLOW"].low * ind, table["FI_FLOW"].high * ind),
-        "W_fans": (
-            table["FO_POW"].low * out**3 + table["FI_POW"].low * ind**3,
-            table["FO_POW"].high * out**3 + table["FI_POW"].high * ind**3,
-        ),
-    }
-
-
 def check_draw(unit: Unit, theta: Mapping[str, float], duration: float = 1200.0) -> DrawReport:
     """Run ``theta`` at constant rated inputs for ``duration`` s and check it (see module)."""
     run = simulate(unit, theta, rated_inputs(unit, duration), diagnostics=True)
@@ -126,7 +111,7 @@ def check_draw(unit: Unit, theta: Mapping[str, float], duration: float = 1200.0)
     second_law = bool(np.all(run["W_ref"].values >= run["W_is"].values - tolerance))
     air = all(
         np.all((low * (1 - 1e-9) <= run[name].values) & (run[name].values <= high * (1 + 1e-9)))
-        for name, (low, high) in air_ranges(unit).items()
+        for name, (low, high) in unit.cycle_model.box_ranges(unit).items()
     )
     recent = run["PC"].sel(time=slice(duration - OSCILLATION_WINDOW, None)).values
     return DrawReport(
@@ -214,7 +199,6 @@ def parameter_effects(
 
 __all__ = [
     "DrawReport",
-    "air_ranges",
     "box_probe",
     "charge_observability",
     "check_draw",

@@ -24,8 +24,6 @@ from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.cycles.base import CycleModel
 from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.inputs import (
-    CYCLE_INPUT_IDS,
-    INPUT_IDS,
     builtin_inputs,
     input_segments,
     validate_inputs,
@@ -58,7 +56,7 @@ took 2.3 times its wall time in CPU)."""
 
 
 def _empty_result(model: CycleModel, times: np.ndarray, diagnostics: bool) -> dict:
-    names = list(model.output_info) + (list(model.diagnostic_info) if diagnostics else [])
+    names = model.outputs.ids if diagnostics else model.outputs.output_ids
     return {name: np.full(times.size, np.nan) for name in names}
 
 
@@ -94,8 +92,8 @@ def simulate(
     controller
         Switch the virtual PI charge controller on/off (default: the unit's setting).
     diagnostics
-        Also return heats, powers, total mass and controller source (the cycle model's
-        ``diagnostic_info``).
+        Also return heats, powers, total mass and controller source (the diagnostics of the
+        cycle model's ``outputs``).
     max_wall_time
         Wall-clock limit in s (default: the unit's ``solver.max_wall_time``).
     solver
@@ -116,8 +114,9 @@ def simulate(
     """
     unit = _builtin_unit() if unit is None else unit
     ensure_compiled(unit)  # before the wall clock starts: compiling is not simulating
+    model = unit.cycle_model
     inputs = builtin_inputs() if inputs is None else inputs
-    validate_inputs(inputs)
+    validate_inputs(inputs, model.inputs)
     if t_end is not None:
         inputs = window(inputs, float(t_end))
     theta = unit.parameters.vector(params)
@@ -128,17 +127,16 @@ def simulate(
     method = check_method(unit.solver.method if solver is None else solver)
 
     started = time.perf_counter()
-    edges, held = input_segments(inputs)
+    edges, held = input_segments(inputs, model.inputs)
     times = np.arange(0.0, edges[-1] + 1e-9 * edges[-1], dt)
     tables = _fluid(unit.refrigerant).tables
-    model = unit.cycle_model
     n = unit.discretisation.n_volumes
     layout = model.layout(n)
     c = model.constants(unit, theta, controller)
     atol = layout.tolerances(unit.solver)
 
     on_grid = np.full((times.size, layout.size), np.nan)
-    controls = np.empty((times.size, len(CYCLE_INPUT_IDS)))
+    controls = np.empty((times.size, len(model.inputs)))
     segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
     controls[:] = held[segment_of]
     stepper = make_solver(method, unit.solver.rtol, atol, unit.solver.max_step, limit)
@@ -167,9 +165,9 @@ def simulate(
         evaluated[done] = model.outputs_along(on_grid[done], controls[done], c, tables, diagnostics)
         for k, name in enumerate(values):
             values[name] = evaluated[:, k]
-        diagnostic = list(model.output_info) + list(model.diagnostic_info)
-        mass = evaluated[done, diagnostic.index("M")]
-        source = evaluated[done, diagnostic.index("mdot_src")]
+        at = model.outputs.offsets
+        mass = evaluated[done, at.M]
+        source = evaluated[done, at.mdot_src]
         mass_error = float(np.max(np.abs(mass - charge)) / charge)
         source_integral = float(np.trapezoid(np.abs(source), times[done]))
     else:
@@ -177,7 +175,7 @@ def simulate(
         source_integral = float("nan")
     if failure is None and not np.isfinite(np.column_stack(list(values.values()))).all():
         failure = Failure(FailureKind.NON_FINITE, "non-finite outputs")
-    info = {**model.output_info, **model.diagnostic_info}
+    info = model.outputs.info
     dataset = xr.Dataset(
         {
             name: ("time", data, {"units": info[name][1], "long_name": info[name][0]})
@@ -294,11 +292,11 @@ class VCCSimulator:
     ) -> None:
         self.unit = load_unit() if unit is None else unit
         self.inputs = builtin_inputs() if inputs is None else inputs
-        validate_inputs(self.inputs)
         model = self.unit.cycle_model
+        validate_inputs(self.inputs, model.inputs)
         output_ids = model.output_ids
         selected = tuple(output_ids if outputs is None else outputs)
-        allowed = output_ids + model.optional_output_ids
+        allowed = output_ids + model.outputs.optional_ids
         unknown = [name for name in selected if name not in allowed]
         if unknown or not selected:
             raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(allowed)}")
@@ -365,7 +363,7 @@ class VCCSimulator:
             max_wall_time=self.max_wall_time,
             solver=self.solver,
             diagnostics=any(
-                name in self.unit.cycle_model.optional_output_ids for name in self.output_names
+                name in self.unit.cycle_model.outputs.optional_ids for name in self.output_names
             ),
         )
         result = result[list(self.output_names)]
@@ -401,13 +399,14 @@ def operating_point(
 ) -> dict[str, float | str]:
     """The (near) steady state reached after ``duration`` s at constant inputs.
 
-    ``conditions`` override the unit's rating point (``valve_opening``, ``compressor_speed``,
-    ``T_ambient``, ``T_indoor``, SI; optional ``RH_indoor``, default dry). Returns the nine
-    outputs and the diagnostics at the end, plus ``superheat`` (K, at the suction),
-    ``subcooling`` (K, condenser outlet), ``capacity`` (W, the cycle's useful heat: evaporator
-    heat cooling, condenser heat heating), ``COP`` (capacity over compressor and fan power),
-    ``energy_balance_error`` ((Q_cond - Q_evap - W_ref) / Q_cond), ``drift`` (largest relative
-    change of an output over the last 100 s) and the run's ``status``/``failure_reason``.
+    ``conditions`` override the unit's rating point (the split unit's ``valve_opening``,
+    ``compressor_speed``, ``T_ambient``, ``T_indoor``, SI; optional ``RH_indoor``, default dry).
+    Returns the outputs and the diagnostics at the end, the cycle model's summary (the split
+    unit's: ``superheat`` (K, at the suction), ``subcooling`` (K, condenser outlet),
+    ``capacity`` (W, the cycle's useful heat: evaporator heat cooling, condenser heat heating),
+    ``COP`` (capacity over compressor and fan power), ``energy_balance_error`` ((Q_cond - Q_evap
+    - W_ref) / Q_cond)), ``drift`` (largest relative change of an output over the last 100 s)
+    and the run's ``status``/``failure_reason``.
 
     Parameters
     ----------
@@ -425,40 +424,34 @@ def operating_point(
         Inputs that differ from the unit's ``[rating]`` point, SI (K, Hz, fractions).
     """
     from pymc_vcc.physics.inputs import constant_inputs
-    from pymc_vcc.physics.refrigerant import saturation_state
 
     unit = _builtin_unit() if unit is None else unit
-    unknown = sorted(set(conditions) - set(CYCLE_INPUT_IDS))
+    model = unit.cycle_model
+    unknown = sorted(set(conditions) - set(model.inputs.ids))
     if unknown:
-        raise ValueError(f"unknown condition(s) {unknown}; allowed are {list(CYCLE_INPUT_IDS)}")
-    point = {name: getattr(unit.rating, name) for name in INPUT_IDS} | conditions
+        raise ValueError(f"unknown condition(s) {unknown}; allowed are {list(model.inputs.ids)}")
     result = simulate(
         unit,
         params,
-        constant_inputs(duration, **point),
+        constant_inputs(duration, **(unit.rating | conditions)),
         diagnostics=True,
         controller=controller,
         output_interval=10.0,
         solver=solver,
     )
     final = {str(name): float(result[name].values[-1]) for name in result.data_vars}
-    tables = _fluid(unit.refrigerant).tables
     recent = result.sel(time=slice(duration - 100.0, None))
-    model = unit.cycle_model
     drift = max(
         float(np.ptp(recent[name].values) / abs(recent[name].values[-1]))
         for name in model.output_ids
     )
-    capacity = final[model.capacity]
     summary: dict[str, float | str] = dict(final)
-    return summary | {
-        "superheat": final["TS"] - saturation_state(tables, final["PS"])[0],
-        "subcooling": saturation_state(tables, final["PC"])[0] - final["TC"],
-        "capacity": capacity,
-        "COP": capacity / (final["W_comp"] + final["W_fans"]),
-        "energy_balance_error": (final["Q_cond"] - final["Q_evap"] - final["W_ref"])
-        / final["Q_cond"],
-        "drift": drift,
-        "status": result.attrs["status"],
-        "failure_reason": result.attrs["failure_reason"],
-    }
+    return (
+        summary
+        | model.summary(final, _fluid(unit.refrigerant).tables)
+        | {
+            "drift": drift,
+            "status": result.attrs["status"],
+            "failure_reason": result.attrs["failure_reason"],
+        }
+    )

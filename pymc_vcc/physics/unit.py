@@ -1,28 +1,36 @@
-"""Unit descriptions: cycle model, fixed geometry, refrigerant, discretisation, solver settings,
-parameters.
+"""Unit descriptions: cycle model, fixed hardware, refrigerant, discretisation, solver settings,
+rating point, parameters.
 
 A unit description is a TOML file (the built-in one ships as ``pymc_vcc/data/split_3p5kw_r410a
 .toml``; the format is documented in ``models/README.md``). ``[unit] cycle`` names its cycle
-model (default ``split-cooling``) and the parameters are checked against that model's own table.
-Loading validates it completely before any simulation runs: unknown keys, missing values,
-non-positive sizes, bounds with low >= high, nominals outside their bounds, unknown cycles and
-unknown refrigerants are errors that name the field and what is allowed. All values are SI.
+model (default ``split-cooling``), which declares the rest: the sections of its hardware
+(:attr:`~pymc_vcc.physics.cycles.base.CycleModel.hardware`), its inputs (the keys of
+``[rating]``) and its parameter table. Every unit has ``[discretisation]``, ``[solver]`` and
+``[controller]``. Loading validates it completely before any simulation runs: unknown keys,
+missing values, non-positive sizes, bounds with low >= high, nominals outside their bounds,
+unknown cycles and unknown refrigerants are errors that name the field and what is allowed. All
+values are SI.
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import MISSING, dataclass, field, fields
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, get_type_hints
 
+from pymc_vcc.physics.cycles import cycle_model
+from pymc_vcc.physics.cycles.base import (
+    ControllerSettings,
+    CycleModel,
+    Discretisation,
+    InputLayout,
+    is_fraction,
+)
 from pymc_vcc.physics.parameters import ParameterIds, ParameterSpec, ParameterTable, parameter_table
 from pymc_vcc.physics.solvers import METHODS
-
-if TYPE_CHECKING:
-    from pymc_vcc.physics.cycles.base import CycleModel
 
 BUILTIN_UNIT = "split_3p5kw_r410a.toml"
 """File name of the built-in unit description inside ``pymc_vcc/data``."""
@@ -32,13 +40,6 @@ HEAT_PUMP_UNIT = "heat_pump_3p5kw_r410a.toml"
 
 SHIPPED_UNITS = (BUILTIN_UNIT, HEAT_PUMP_UNIT)
 """File names of the units shipped inside ``pymc_vcc/data``, which :func:`load_unit` accepts."""
-
-
-@dataclass(frozen=True)
-class Discretisation:
-    """Finite volumes per heat exchanger."""
-
-    n_volumes: int
 
 
 DIFFERENCING_TOLERANCE_SCALE = 0.1
@@ -63,114 +64,12 @@ class SolverSettings:
     method: str = "radau"  # one of pymc_vcc.physics.solvers.METHODS
 
 
-@dataclass(frozen=True)
-class ControllerSettings:
-    """Virtual PI charge controller: proportional gain (1/s); Ki = Kp^2/4 (critical damping)."""
-
-    kp: float
-    enabled: bool
-
-
-@dataclass(frozen=True)
-class CompressorGeometry:
-    """Fixed compressor data (its correction factors are calibration parameters)."""
-
-    displacement: float  # m3 per revolution
-    clearance: float  # clearance ratio of the volumetric-efficiency model, -
-    polytropic_exponent: float  # re-expansion exponent, -
-    isentropic_efficiency: float  # -
-    loss_share_to_refrigerant: float  # share of the losses (power above W_s) heating the gas, -
-    shell_ua: float  # shell heat-loss conductance to ambient, W/K
-    max_discharge_temperature: float  # thermal limit of the discharge gas, K
-    protection_pressure_start: float  # discharge pressure where the speed droop starts, Pa
-    protection_pressure_stop: float  # discharge pressure of 5 % speed, Pa
-
-
-@dataclass(frozen=True)
-class ValveGeometry:
-    """Electronic expansion valve: flow area at full opening (m2), ṁ = A a sqrt(2 ρ Δp)."""
-
-    flow_area: float
-
-
-@dataclass(frozen=True)
-class HeatExchangerGeometry:
-    """Fixed heat-exchanger data; coil length per path is a calibration parameter."""
-
-    tube_inner_diameter: float  # m
-    n_paths: int  # parallel refrigerant circuits
-    air_side_area_per_length: float  # air-side (fin and tube) area per m of tube, m2/m
-    wall_heat_capacity_per_length: float  # tube and fin heat capacity per m of tube, J/(K m)
-    nominal_mass_flow: float  # refrigerant flow at which the nominal HTCs hold, kg/s
-
-
-@dataclass(frozen=True)
-class PipeGeometry:
-    """Connecting line; its length is a calibration parameter."""
-
-    inner_diameter: float  # m
-
-
-@dataclass(frozen=True)
-class TankGeometry:
-    """Suction accumulator with a bleed (oil-return) hole in its J-tube."""
-
-    volume: float  # m3
-    bleed_fraction_full: float  # liquid mass fraction of the outflow with a full tank, -
-
-
-@dataclass(frozen=True)
-class FanSettings:
-    """Fan running speed as a fraction of its rated ("nominal") speed; the fan laws scale the
-    rated flow and power (Table III) to it."""
-
-    speed_fraction: float
-
-
-@dataclass(frozen=True)
-class AirProperties:
-    """Constant moist-air properties on both coils."""
-
-    density: float  # kg/m3
-    specific_heat: float  # J/(kg K)
-
-
-@dataclass(frozen=True)
-class RatingPoint:
-    """Rated operating conditions of the unit (constant inputs, SI)."""
-
-    valve_opening: float  # -
-    compressor_speed: float  # Hz
-    T_ambient: float  # K
-    T_indoor: float  # K
-
-
-@dataclass(frozen=True)
-class PressureDrop:
-    """Lumped pressure drops: Darcy friction factor of straight tube, and the ratio of a coil's
-    drop to straight-tube homogeneous friction (return bends, headers, two-phase slip)."""
-
-    darcy_friction_factor: float
-    coil_multiplier: float
-
-
 _SECTIONS: dict[str, type] = {
     "discretisation": Discretisation,
     "solver": SolverSettings,
     "controller": ControllerSettings,
-    "compressor": CompressorGeometry,
-    "expansion_valve": ValveGeometry,
-    "condenser": HeatExchangerGeometry,
-    "evaporator": HeatExchangerGeometry,
-    "liquid_line": PipeGeometry,
-    "vapor_line": PipeGeometry,
-    "suction_tank": TankGeometry,
-    "outdoor_fan": FanSettings,
-    "indoor_fan": FanSettings,
-    "air": AirProperties,
-    "pressure_drop": PressureDrop,
-    "rating": RatingPoint,
 }
+"""The sections every unit has; its cycle model adds its hardware's, then ``[rating]``."""
 
 DEFAULT_CYCLE = "split-cooling"
 """The cycle of a unit description that names none."""
@@ -180,18 +79,11 @@ _HEAD_KEYS = ["name", "description", "refrigerant", "cycle"]
 _CHOICES: dict[tuple[str, str], tuple[str, ...]] = {("solver", "method"): METHODS}
 """Allowed values of the text fields."""
 
-_FRACTIONS = {
-    ("compressor", "clearance"),
-    ("compressor", "isentropic_efficiency"),
-    ("compressor", "loss_share_to_refrigerant"),
-    ("suction_tank", "bleed_fraction_full"),
-}
-
 
 @dataclass(frozen=True)
 class Unit:
-    """A complete, validated unit description: one field per section of the unit file
-    (``models/README.md``), SI units.
+    """A complete, validated unit description: one field per common section of the unit file
+    (``models/README.md``), the cycle's own sections in ``hardware``, SI units.
 
     Attributes
     ----------
@@ -200,15 +92,15 @@ class Unit:
     refrigerant
         ``R410A``, ``R32`` or ``R134a``.
     cycle
-        Name of the cycle model (``split-cooling`` or ``heat-pump-heating``).
+        Name of the cycle model (one of :data:`~pymc_vcc.physics.cycles.CYCLE_MODELS`).
     discretisation, solver, controller
         Finite volumes per coil; ODE solver and tolerances; the virtual PI charge controller.
-    compressor, expansion_valve, condenser, evaporator, liquid_line, vapor_line, suction_tank
-        The components' fixed data (m, m², m³, W/K, ...).
-    outdoor_fan, indoor_fan, air, pressure_drop
-        Fan speed fractions; air density (kg/m³) and heat capacity (J/(kg K)); friction.
+    hardware
+        The cycle's sections (an instance of its model's ``hardware``; for the split unit
+        ``compressor``, ``condenser``, ``outdoor_fan``, ... with their fixed data, m, m², W/K).
     rating
-        The rating point's inputs (fraction, Hz, K), the point ``operating_point`` uses.
+        The rating point: a value per input of the cycle (SI), the point ``operating_point``
+        uses.
     parameters
         The calibration parameters with their units, bounds and nominal values.
     """
@@ -220,25 +112,13 @@ class Unit:
     discretisation: Discretisation
     solver: SolverSettings
     controller: ControllerSettings
-    compressor: CompressorGeometry
-    expansion_valve: ValveGeometry
-    condenser: HeatExchangerGeometry
-    evaporator: HeatExchangerGeometry
-    liquid_line: PipeGeometry
-    vapor_line: PipeGeometry
-    suction_tank: TankGeometry
-    outdoor_fan: FanSettings
-    indoor_fan: FanSettings
-    air: AirProperties
-    pressure_drop: PressureDrop
-    rating: RatingPoint
+    hardware: Any
+    rating: dict[str, float] = field(hash=False)  # compared, but a unit stays hashable
     parameters: ParameterTable
 
     @property
     def cycle_model(self) -> CycleModel:
         """The cycle model this unit runs (``[unit] cycle``)."""
-        from pymc_vcc.physics.cycles import cycle_model
-
         return cycle_model(self.cycle)
 
     def with_changes(self, **sections: dict[str, Any]) -> Unit:
@@ -247,9 +127,10 @@ class Unit:
         Example: ``unit.with_changes(discretisation={"n_volumes": 20})``.
         """
         data = unit_to_dict(self)
+        allowed = sorted(set(data) - {"unit", "parameters"})
         for section, values in sections.items():
-            if section not in data or not isinstance(data[section], dict):
-                raise ValueError(f"unknown section {section!r}; allowed: {sorted(_SECTIONS)}")
+            if section not in allowed:
+                raise ValueError(f"unknown section {section!r}; allowed: {allowed}")
             data[section].update(values)
         return unit_from_dict(data, source=f"{self.name} (modified)")
 
@@ -304,7 +185,7 @@ def _section(source: str, section: str, cls: type, raw: Any) -> Any:
             value = float(value)
             if not math.isfinite(value) or value <= 0.0:
                 raise ValueError(f"{key}: expected a finite positive number, got {value!r}")
-            if (section, f.name) in _FRACTIONS and value >= 1.0:
+            if is_fraction(f) and value >= 1.0:
                 raise ValueError(f"{key}: expected a fraction in (0, 1), got {value!r}")
         values[f.name] = value
     return cls(**values)
@@ -369,30 +250,60 @@ def _check_refrigerant(source: str, name: Any) -> str:
     return name
 
 
+def _hardware_sections(model: CycleModel) -> dict[str, type]:
+    """Section name -> its dataclass, of the cycle's hardware, in order."""
+    types = get_type_hints(model.hardware)
+    return {f.name: types[f.name] for f in fields(model.hardware)}
+
+
+def _rating(source: str, raw: Any, inputs: InputLayout) -> dict[str, float]:
+    where = f"{source} [rating]"
+    if not isinstance(raw, dict):
+        raise ValueError(f"{where}: expected a table of values, got {type(raw).__name__}")
+    _check_keys(where, raw, list(inputs.ids), frozenset(inputs.defaults))
+    rating = {}
+    for spec in inputs:
+        if spec.id not in raw:
+            continue
+        value = raw[spec.id]
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"{where} {spec.id}: expected a number, got {value!r}")
+        if not spec.low <= value <= spec.high:
+            raise ValueError(
+                f"{where} {spec.id}: {value!r} {spec.unit} is outside the allowed range "
+                f"[{spec.low}, {spec.high}]"
+            )
+        rating[spec.id] = float(value)
+    return rating
+
+
 def unit_from_dict(data: dict[str, Any], source: str = "unit description") -> Unit:
     """Validate a parsed unit description and build a :class:`Unit`."""
-    _check_keys(source, data, ["unit", *_SECTIONS, "parameters"])
-    head = data["unit"]
+    head = data.get("unit")
     if not isinstance(head, dict):
         raise ValueError(f"{source} [unit]: expected a table")
     _check_keys(
         f"{source} [unit]", {"cycle": DEFAULT_CYCLE} | head, _HEAD_KEYS
     )  # ``cycle`` may be left out: the built-in split cooling cycle
     model = _check_cycle(source, head.get("cycle", DEFAULT_CYCLE))
+    hardware = _hardware_sections(model)
+    _check_keys(source, data, ["unit", *_SECTIONS, *hardware, "rating", "parameters"])
     sections = {name: _section(source, name, cls, data[name]) for name, cls in _SECTIONS.items()}
     return Unit(
         name=str(head["name"]),
         description=str(head["description"]),
         refrigerant=_check_refrigerant(source, head["refrigerant"]),
         cycle=model.name,
+        hardware=model.hardware(
+            **{name: _section(source, name, cls, data[name]) for name, cls in hardware.items()}
+        ),
+        rating=_rating(source, data["rating"], model.inputs),
         parameters=_parameters(source, data["parameters"], model.parameters),
         **sections,
     )
 
 
 def _check_cycle(source: str, name: Any) -> CycleModel:
-    from pymc_vcc.physics.cycles import cycle_model
-
     if not isinstance(name, str):
         raise ValueError(f"{source} [unit] cycle: expected a name, got {name!r}")
     try:
@@ -411,9 +322,11 @@ def unit_to_dict(unit: Unit) -> dict[str, Any]:
             "cycle": unit.cycle,
         }
     }
-    for name in _SECTIONS:
-        section = getattr(unit, name)
+    sections = {name: getattr(unit, name) for name in _SECTIONS}
+    sections |= {f.name: getattr(unit.hardware, f.name) for f in fields(unit.hardware)}
+    for name, section in sections.items():
         data[name] = {f.name: getattr(section, f.name) for f in fields(section)}
+    data["rating"] = dict(unit.rating)
     data["parameters"] = {
         spec.id: {
             "name": spec.name,

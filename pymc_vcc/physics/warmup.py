@@ -29,7 +29,7 @@ from numba.core.dispatcher import Dispatcher
 from pymc_vcc.physics import source_digest
 from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.cycles import CycleModel
-from pymc_vcc.physics.inputs import INPUT_IDS, constant_inputs, input_segments
+from pymc_vcc.physics.inputs import constant_inputs, input_segments
 from pymc_vcc.physics.sundials import compile_output_loop
 from pymc_vcc.physics.unit import Unit
 
@@ -110,8 +110,8 @@ def _run_kernels(unit: Unit) -> None:
     tables = load_refrigerant(unit.refrigerant).tables
     model = unit.cycle_model
     n = unit.discretisation.n_volumes
-    rating = constant_inputs(1.0, **{name: getattr(unit.rating, name) for name in INPUT_IDS})
-    u = input_segments(rating)[1][0]  # every input the cycle reads, optional ones at default
+    rating = constant_inputs(1.0, **unit.rating)
+    u = input_segments(rating, model.inputs)[1][0]  # every input, optional ones at default
     c = model.constants(unit, unit.parameters.nominal)
     y = model.initial_state(c, n, u, tables)
     dydt = np.empty(y.size)

@@ -43,7 +43,6 @@ from pymc_vcc.inference.pymc.smc import check_kernel, check_max_steps, sample_sm
 from pymc_vcc.inference.regression import ROUNDS, check_draws, regression_abc
 from pymc_vcc.inference.samplers import SAMPLERS, SmcKernel
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
-from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
 from pymc_vcc.physics.unit import DIFFERENCING_TOLERANCE_SCALE, Unit
 from pymc_vcc.plots import (
@@ -446,7 +445,9 @@ def estimation_study(
     started = time.perf_counter()
     unit = settings.unit(unit)
     if refine:  # each round must keep enough draws to adjust every parameter and noise scale
-        check_draws(refine // ROUNDS, len(unit.parameters) + len(OUTPUT_IDS), REFINE_ACCEPT)
+        check_draws(
+            refine // ROUNDS, len(unit.parameters) + len(unit.cycle_model.output_ids), REFINE_ACCEPT
+        )
     full = VCCSimulator(unit, inputs)
     draw_seed, sampler_seed, predictive_seed = settings.seeds(3)
     rng = np.random.default_rng(draw_seed)
@@ -465,7 +466,7 @@ def estimation_study(
     observed = [ref.sel(time=slice(0.0, t_calibration)) for ref in references]
     calibration_model = VCCSimulator(unit, full.inputs, t_window=(0.0, t_calibration))
     prior = UniformPrior({spec.id: (spec.low, spec.high) for spec in unit.parameters})
-    noise = None if sensor_noise else dict.fromkeys(OUTPUT_IDS, noise_bounds)
+    noise = None if sensor_noise else dict.fromkeys(unit.cycle_model.output_ids, noise_bounds)
     with settings.open_executor() as executor:
         found = identifiability(  # what no data can narrow: the particles must not either
             VCCSimulator(
@@ -481,7 +482,7 @@ def estimation_study(
         if method != "rejection":
             calibration = smc_sequential_calibration(
                 calibration_model,
-                with_noise(prior, noise, OUTPUT_IDS),
+                with_noise(prior, noise, unit.cycle_model.output_ids),
                 observed,
                 draws=smc_draws or settings.work.smc_draws,
                 epsilon=smc_epsilon,

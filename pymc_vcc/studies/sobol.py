@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 import xarray as xr
 
 from pymc_vcc.inference.sensitivity import sobol_indices
-from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit
 from pymc_vcc.plots import plot_sobol_heatmap, save_figure
@@ -83,7 +82,7 @@ def sobol_study(
         indices = sobol_indices(
             simulator,
             bounds,
-            OUTPUT_IDS,
+            unit.cycle_model.output_ids,
             n_base=settings.work.sobol_base,
             window=window,
             executor=executor,

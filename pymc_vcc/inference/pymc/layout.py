@@ -23,7 +23,7 @@ from pymc.distributions.simulator import SimulatorRV
 from pymc.model import Model
 
 from pymc_vcc.inference.pymc.model import SimulatorFunction
-from pymc_vcc.physics.cycles import OUTPUT_INFO
+from pymc_vcc.physics.cycles import MEASURABLE_OUTPUT_INFO
 
 TOTALS = {
     "n_simulations": ("simulations", "resumed_simulations"),
@@ -95,9 +95,9 @@ def observed_outputs(model: Model) -> xr.Dataset:
         time_dim = f"{rv.name}_time" if len(nodes) > 1 else "time"
         for output, variable in dataset.data_vars.items():
             attrs = dict(variable.attrs)
-            if output in OUTPUT_INFO:
-                attrs.setdefault("long_name", OUTPUT_INFO[output][0])
-                attrs.setdefault("units", OUTPUT_INFO[output][1])
+            if output in MEASURABLE_OUTPUT_INFO:
+                attrs.setdefault("long_name", MEASURABLE_OUTPUT_INFO[output][0])
+                attrs.setdefault("units", MEASURABLE_OUTPUT_INFO[output][1])
             name = f"{rv.name}_{output}" if len(nodes) > 1 else str(output)
             values = variable.rename({variable.dims[0]: time_dim}).assign_attrs(attrs)
             time = variable[variable.dims[0]]

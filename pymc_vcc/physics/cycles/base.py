@@ -1,34 +1,38 @@
 """What every cycle model provides, and the Numba kernels that need no topology.
 
-A cycle model (one module per topology) owns its parameter table, inputs, outputs and
-diagnostics, and one :class:`StateLayout` built from named blocks. The layout fixes every offset
-once; Numba reads them from the layout's record (``c.layout.<block>``), never from a number
-written in the code. A pressure zone is a ``PRESSURE`` block followed by the ``ENTHALPY``
-blocks of its cells in flow order, so cell properties, total mass and the columns of the
-Jacobian follow from the layout alone.
+A cycle model (one module per topology) owns its whole description: the sections of its unit
+file (:attr:`CycleModel.hardware`), its parameter table, its inputs (:class:`InputLayout`), its
+outputs and diagnostics (:class:`OutputLayout`), its operating-point summary, and one
+:class:`StateLayout` built from named blocks. The layouts fix every offset once; Numba reads
+them by name, never as a number written in the code: the state's from the layout's record
+(``c.layout.<block>``), the inputs' and outputs' from a layout's ``offsets`` (a named tuple
+of constants, folded at compile time). A pressure zone is a ``PRESSURE`` block followed by the
+``ENTHALPY`` blocks of its cells in flow order, so cell properties, total mass and the columns
+of the Jacobian follow from the layout alone.
 
 The driver (:mod:`pymc_vcc.physics.simulate`) integrates any :class:`CycleModel` through its
-Numba kernels ``evaluate``, ``jacobian``, ``outputs_along`` and ``total_mass``.
+Numba kernels ``evaluate``, ``jacobian``, ``outputs_along`` and ``total_mass``. This package
+knows nothing of unit files: the unit loader (:mod:`pymc_vcc.physics.unit`) reads a file
+against the cycle model it names.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections import namedtuple
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import Field, dataclass
 from enum import StrEnum
-from typing import TYPE_CHECKING, ClassVar
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 from numba import njit
 from scipy.optimize import brentq
 
 from pymc_vcc.physics.components.density import cell_state, cell_values, fillet_memo
+from pymc_vcc.physics.parameters import ParameterIds, ParameterTable
 from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
-
-if TYPE_CHECKING:
-    from pymc_vcc.physics.unit import SolverSettings, Unit
 
 N_PROPERTIES = 5
 """Rows of a cell-property array: T (K), ρ (kg/m³), ∂ρ/∂p, ∂ρ/∂h, quality."""
@@ -53,6 +57,151 @@ BLOCK_UNITS = {
     BlockKind.INTEGRAL: "kg s",
 }
 """The SI unit of each kind of state block."""
+
+
+FRACTION = {"fraction": True}
+"""Metadata of a hardware section's field (``field(metadata=FRACTION)``) that must lie in (0, 1)."""
+
+
+def is_fraction(section_field: Field) -> bool:
+    """Whether a hardware section's field was declared with :data:`FRACTION`."""
+    return bool(section_field.metadata.get("fraction"))
+
+
+@dataclass(frozen=True)
+class Discretisation:
+    """Finite volumes per heat exchanger."""
+
+    n_volumes: int
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    """Virtual PI charge controller: proportional gain (1/s); Ki = Kp^2/4 (critical damping)."""
+
+    kp: float
+    enabled: bool
+
+
+class Tolerances(Protocol):
+    """Absolute tolerances of the state by block kind (a unit's solver settings)."""
+
+    @property
+    def atol_pressure(self) -> float: ...  # Pa
+
+    @property
+    def atol_enthalpy(self) -> float: ...  # J/kg
+
+    @property
+    def atol_temperature(self) -> float: ...  # K
+
+
+class UnitDescription(Protocol):
+    """What a cycle model reads of a unit description (a :class:`pymc_vcc.physics.unit.Unit`):
+    the sections every cycle has and its own ones (an instance of :attr:`CycleModel.hardware`)."""
+
+    @property
+    def discretisation(self) -> Discretisation: ...
+
+    @property
+    def controller(self) -> ControllerSettings: ...
+
+    @property
+    def hardware(self) -> Any: ...
+
+    @property
+    def parameters(self) -> ParameterTable: ...
+
+
+def offsets(names: Sequence[str]) -> Any:
+    """A named tuple of 0, 1, 2, ... by ``names``: a Numba kernel reads a module-level one as
+    constants (folded at compile time, as fast as a number written in the code)."""
+    return namedtuple("Offsets", names)(*range(len(names)))
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """One input: id, long name, SI unit, the physically allowed range [low, high], the value a
+    cycle uses when a profile does not carry it (None: the input is required), and whether a
+    controller sets it in steps (``stepped``: a measured log's reader never averages across a
+    step of it)."""
+
+    id: str
+    name: str
+    unit: str
+    low: float
+    high: float
+    default: float | None = None
+    stepped: bool = False
+
+
+class InputLayout:
+    """The inputs a cycle reads, in the order of its input vector ``u``: the required ones, then
+    the optional ones; a kernel reads ``u[offsets.<id>]``."""
+
+    def __init__(self, specs: Sequence[InputSpec]) -> None:
+        self.specs: tuple[InputSpec, ...] = tuple(specs)
+        ids = [spec.id for spec in self.specs]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"inputs need distinct ids: {ids}")
+        optional = [spec.default is not None for spec in self.specs]
+        if optional != sorted(optional):
+            raise ValueError(f"required inputs come before the optional ones: {ids}")
+        self.ids: tuple[str, ...] = tuple(ids)
+        self.required_ids: tuple[str, ...] = tuple(
+            spec.id for spec in self.specs if spec.default is None
+        )
+        self.defaults: dict[str, float] = {
+            spec.id: spec.default for spec in self.specs if spec.default is not None
+        }
+        self.offsets = offsets(ids)
+
+    def __getitem__(self, input_id: str) -> InputSpec:
+        for spec in self.specs:
+            if spec.id == input_id:
+                return spec
+        raise KeyError(f"unknown input {input_id!r}; inputs are {list(self.ids)}")
+
+    def __iter__(self) -> Iterator[InputSpec]:
+        return iter(self.specs)
+
+    def __len__(self) -> int:
+        return len(self.specs)
+
+
+class OutputLayout:
+    """What a cycle's kernels write into ``out``: its outputs, then its diagnostics, each by id
+    at a fixed offset (a kernel writes ``out[offsets.<id>]``), with a long name and SI unit.
+
+    ``optional`` names diagnostics a simulator may also return as outputs (quantities field
+    loggers measure)."""
+
+    def __init__(
+        self,
+        outputs: Mapping[str, tuple[str, str]],
+        diagnostics: Mapping[str, tuple[str, str]],
+        optional: Sequence[str] = (),
+    ) -> None:
+        if set(outputs) & set(diagnostics):
+            raise ValueError(f"ids both outputs and diagnostics: {set(outputs) & set(diagnostics)}")
+        if not set(optional) <= set(diagnostics):
+            raise ValueError(f"optional outputs must be diagnostics: {list(optional)}")
+        self.output_info: dict[str, tuple[str, str]] = dict(outputs)
+        """Long name and SI unit of each output, in order."""
+        self.diagnostic_info: dict[str, tuple[str, str]] = dict(diagnostics)
+        """Long name and SI unit of each further quantity after the outputs, in order."""
+        self.info: dict[str, tuple[str, str]] = {**outputs, **diagnostics}
+        self.output_ids: tuple[str, ...] = tuple(outputs)
+        self.optional_ids: tuple[str, ...] = tuple(optional)
+        self.ids: tuple[str, ...] = tuple(self.info)
+        self.size = len(self.ids)
+        self.offsets = offsets(self.ids)
+
+    @property
+    def measurable_info(self) -> dict[str, tuple[str, str]]:
+        """Outputs a simulator may return and a logger may measure: the outputs, then the
+        optional ones."""
+        return {name: self.info[name] for name in self.output_ids + self.optional_ids}
 
 
 @dataclass(frozen=True)
@@ -135,7 +284,7 @@ class StateLayout:
         """The SI unit of each state variable (:data:`BLOCK_UNITS`)."""
         return tuple(BLOCK_UNITS[block.kind] for block in self.blocks for _ in range(block.size))
 
-    def tolerances(self, solver: SolverSettings) -> np.ndarray:
+    def tolerances(self, solver: Tolerances) -> np.ndarray:
         """Absolute tolerances of the state, by block kind, from the unit's solver settings."""
         by_kind = {
             BlockKind.PRESSURE: solver.atol_pressure,
@@ -150,14 +299,14 @@ class StateLayout:
 
 
 class CycleModel(ABC):
-    """One cycle topology: its parameters, outputs, state layout and Numba kernels.
+    """One cycle topology: its description (unit-file sections, parameters, inputs, outputs,
+    operating-point summary), state layout and Numba kernels.
 
     Kernels (Numba dispatchers; ``c`` is the one-element record array of :meth:`constants`,
-    ``u`` the inputs ordered as :data:`~pymc_vcc.physics.inputs.CYCLE_INPUT_IDS`, absent optional
-    inputs at their default):
+    ``u`` the inputs ordered as :attr:`inputs`, absent optional inputs at their default):
 
     * ``evaluate(y, u, c, tables, dydt, out) -> bool``: dy/dt into ``dydt``, outputs then
-      diagnostics into ``out``; False when a property left the tables;
+      diagnostics into ``out`` (:attr:`outputs`); False when a property left the tables;
     * ``jacobian(y, u, c, tables, f0) -> ndarray``: ∂f/∂y given f0 = f(y);
     * ``outputs_along(ys, us, c, tables, rates) -> ndarray``: outputs and diagnostics row by
       row; with ``rates`` False those that need the walls' and zones' balances (the heats)
@@ -168,16 +317,18 @@ class CycleModel(ABC):
     name: ClassVar[str]
     """The id a unit description names in ``[unit] cycle``."""
     description: ClassVar[str]
-    parameters: ClassVar[tuple[tuple[str, str], ...]]
+    hardware: ClassVar[type]
+    """A frozen dataclass with one field per section of the unit file that this cycle adds to
+    the common ones (``[discretisation]``, ``[solver]``, ``[controller]``, ``[rating]``), each a
+    frozen dataclass of numbers (SI; a field declared with :data:`FRACTION` must lie in
+    (0, 1)). The unit loader reads and checks them; :meth:`constants` reads them."""
+    parameters: ClassVar[ParameterIds]
     """(id, unit) of the calibration parameters a unit of this cycle must give."""
-    output_info: ClassVar[dict[str, tuple[str, str]]]
-    """Long name and unit of each output, in order."""
-    diagnostic_info: ClassVar[dict[str, tuple[str, str]]]
-    """Further quantities after the outputs; must include ``M`` (kg) and ``mdot_src`` (kg/s)."""
-    optional_output_ids: ClassVar[tuple[str, ...]] = ()
-    """Diagnostics a simulator may also return as outputs (quantities field loggers measure)."""
-    capacity: ClassVar[str]
-    """The diagnostic that is the unit's useful heat, W (what its COP divides)."""
+    inputs: ClassVar[InputLayout]
+    """The inputs it reads (a unit's ``[rating]`` gives the required ones)."""
+    outputs: ClassVar[OutputLayout]
+    """Its outputs then diagnostics; the diagnostics must include ``M`` (kg) and ``mdot_src``
+    (kg/s)."""
     evaluate: ClassVar[Callable[..., bool]]
     jacobian: ClassVar[Callable[..., np.ndarray]]
     outputs_along: ClassVar[Callable[..., np.ndarray]]
@@ -186,12 +337,12 @@ class CycleModel(ABC):
     @property
     def output_ids(self) -> tuple[str, ...]:
         """Output ids in the order of ``out``."""
-        return tuple(self.output_info)
+        return self.outputs.output_ids
 
     @property
     def n_eval(self) -> int:
         """Length of ``out``: outputs then diagnostics."""
-        return len(self.output_info) + len(self.diagnostic_info)
+        return self.outputs.size
 
     @abstractmethod
     def layout(self, n_volumes: int) -> StateLayout:
@@ -199,7 +350,7 @@ class CycleModel(ABC):
 
     @abstractmethod
     def constants(
-        self, unit: Unit, theta: np.ndarray, controller: bool | None = None
+        self, unit: UnitDescription, theta: np.ndarray, controller: bool | None = None
     ) -> np.ndarray:
         """The constants record (a one-element structured array) from a unit and a parameter
         vector ordered as :attr:`parameters`; ``controller`` overrides the unit's
@@ -211,6 +362,17 @@ class CycleModel(ABC):
     ) -> np.ndarray:
         """A state holding exactly the charge :meth:`charge` at the first inputs ``inputs``;
         ``ValueError`` if the unit cannot hold it."""
+
+    @abstractmethod
+    def summary(self, final: Mapping[str, float], tables) -> dict[str, float]:
+        """What an operating point adds to the outputs and diagnostics ``final`` at its end
+        (:func:`~pymc_vcc.physics.simulate.operating_point`): at least ``capacity`` (W, the
+        useful heat) and ``COP``."""
+
+    @abstractmethod
+    def box_ranges(self, unit: UnitDescription) -> dict[str, tuple[float, float]]:
+        """Ranges (low, high) that diagnostics must stay inside anywhere in the unit's parameter
+        box, SI; the physics probes check them."""
 
     def charge(self, c: np.ndarray) -> float:
         """The charge M0 the controller holds, kg."""

@@ -31,7 +31,7 @@ from pymc_vcc.physics.cycles.base import (
     quality_enthalpy,
     stored_mass,
 )
-from pymc_vcc.physics.cycles.split_balances import SplitUnitCycle, cell_volumes
+from pymc_vcc.physics.cycles.split_balances import SplitUnitCycle, U, cell_volumes
 from pymc_vcc.physics.cycles.split_unit import filled_coils
 from pymc_vcc.physics.refrigerant import p_sat_from_T
 
@@ -93,10 +93,14 @@ class HeatPumpHeating(SplitUnitCycle):
         """Initialisation by M0 alone: condensing 20 K above the indoor air, evaporating 8 K
         below the outdoor air, the fill level of :func:`filled_state` found by root-finding on the
         total mass (:func:`~.base.place_charge`)."""
-        p_c = p_sat_from_T(tables, inputs[3] + 20.0)
-        p_e = p_sat_from_T(tables, inputs[2] - 8.0)
+        p_c = p_sat_from_T(tables, inputs[U.T_indoor] + 20.0)
+        p_e = p_sat_from_T(tables, inputs[U.T_ambient] - 8.0)
         return place_charge(
             lambda s: filled_state(s, p_c, p_e, c, tables),
             lambda y: total_mass(y, c, tables),
             self.charge(c),
         )
+
+
+CYCLE = HeatPumpHeating()
+"""This module's cycle, found by the registry (:mod:`pymc_vcc.physics.cycles`)."""

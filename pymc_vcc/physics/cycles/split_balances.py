@@ -27,7 +27,8 @@ evaporates below the dew point; where it condenses there is no latent load (``Q_
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, ClassVar, Literal, NamedTuple
+from collections.abc import Mapping
+from typing import ClassVar, Literal, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -47,19 +48,20 @@ from pymc_vcc.physics.components.smooth import smooth_pos, upwind_weight
 from pymc_vcc.physics.cycles.base import (
     N_PROPERTIES,
     CycleModel,
+    UnitDescription,
     cell_properties,
     perturb,
     restore,
     stored_mass,
 )
 from pymc_vcc.physics.cycles.split_unit import (
-    DIAGNOSTIC_INFO,
     DP_REG,
     FLOW_EPS,
-    OPTIONAL_OUTPUT_IDS,
-    OUTPUT_INFO,
+    INPUTS,
+    OUTPUTS,
     PARAMETERS,
     SRC_EPS,
+    SplitUnitHardware,
     coil_cell_heat,
     coil_friction_density,
     flow_through_drops,
@@ -70,14 +72,18 @@ from pymc_vcc.physics.cycles.split_unit import (
 from pymc_vcc.physics.refrigerant import (
     SaturationPoint,
     saturation_point,
+    saturation_state,
     state_at,
     state_values_at,
 )
 
-if TYPE_CHECKING:
-    from pymc_vcc.physics.unit import Unit
+U = INPUTS.offsets
+"""Where each input sits in ``u`` (``u[U.T_ambient]``), constants to Numba."""
 
-N_EVAL = len(OUTPUT_INFO) + len(DIAGNOSTIC_INFO)
+OUT = OUTPUTS.offsets
+"""Where each output and diagnostic sits in ``out`` (``out[OUT.TD]``), constants to Numba."""
+
+N_EVAL = OUTPUTS.size
 
 MEMO_COLUMNS = 10
 """A remembered coil cell heat: p, T_wall, flow scale, h_in, x_in, T_in, h, x, T, then the heat."""
@@ -203,7 +209,7 @@ def flows(y, u, c, tables, props, sums):
     the sums they read the pressures, the integral and the zones' end cells only."""
     at = c.layout
     heating = hot_gas_line(at)
-    speed, T_amb = u[1], u[2]
+    speed, T_amb = u[U.compressor_speed], u[U.T_ambient]
     p_c = y[at.p_cond]
     p_e = y[at.p_evap]
     comp = c.compressor
@@ -251,7 +257,7 @@ def flows(y, u, c, tables, props, sums):
 
     # ---- valve and charge controller
     m_valve = valve_mass_flow(
-        u[0],
+        u[U.valve_opening],
         c.valve.flow_area,
         c.valve.cf_lev,
         rho_c[nc - 1],
@@ -297,7 +303,7 @@ def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
     n = at.h_liquid_line - at.h_cond
     heating = hot_gas_line(at)
     first = 1 if heating else 0  # the condenser's first cell in the high-side zone
-    T_amb, T_ind, rh_ind = u[2], u[3], u[4]
+    T_amb, T_ind, rh_ind = u[U.T_ambient], u[U.T_indoor], u[U.RH_indoor]
     p_c = y[at.p_cond]
     p_e = y[at.p_evap]
     cond, evap = c.condenser, c.evaporator
@@ -435,34 +441,34 @@ def balances(y, u, c, tables, props, dydt, out, rates_too=True):
     outdoor, indoor = (evap, cond) if heating else (cond, evap)
     nc = at.zones[0, 1]
 
-    # ---- outputs and diagnostics, in the order of OUTPUT_INFO and DIAGNOSTIC_INFO
-    out[0] = flow.T_d
-    out[1] = flow.p_d
-    out[2] = flow.T_s
-    out[3] = flow.p_s
-    out[4] = props[0, first + n - 1]  # the condenser's last cell
-    out[5] = y[at.p_cond]
-    out[6] = props[0, nc + n - 1]
-    out[7] = y[at.p_evap]
-    out[8] = flow.m_comp
-    out[9] = q_cond
-    out[10] = q_evap
-    out[11] = flow.w_comp
-    out[12] = flow.w_ref
-    out[13] = cond.fan_power + evap.fan_power
-    out[14] = flow.mass
-    out[15] = flow.m_src
-    out[16] = flow.m_valve
-    out[17] = flow.w_is
-    out[18] = flow.q_comp_amb
-    out[19] = outdoor.air_flow
-    out[20] = indoor.air_flow
-    out[21] = flow.level
-    out[22] = flow.dp_cond
-    out[23] = flow.dp_evap
-    out[24] = flow.dp_vap
-    out[25] = 0.0 if heating else q_latent  # the indoor coil condenses: no latent load
-    out[26] = 1.0 if heating else q_sensible / (q_sensible + q_latent)
+    # ---- outputs and diagnostics (OUTPUTS)
+    out[OUT.TD] = flow.T_d
+    out[OUT.PD] = flow.p_d
+    out[OUT.TS] = flow.T_s
+    out[OUT.PS] = flow.p_s
+    out[OUT.TC] = props[0, first + n - 1]  # the condenser's last cell
+    out[OUT.PC] = y[at.p_cond]
+    out[OUT.TE] = props[0, nc + n - 1]
+    out[OUT.PE] = y[at.p_evap]
+    out[OUT.MDOT] = flow.m_comp
+    out[OUT.Q_cond] = q_cond
+    out[OUT.Q_evap] = q_evap
+    out[OUT.W_comp] = flow.w_comp
+    out[OUT.W_ref] = flow.w_ref
+    out[OUT.W_fans] = cond.fan_power + evap.fan_power
+    out[OUT.M] = flow.mass
+    out[OUT.mdot_src] = flow.m_src
+    out[OUT.mdot_valve] = flow.m_valve
+    out[OUT.W_is] = flow.w_is
+    out[OUT.Q_comp_amb] = flow.q_comp_amb
+    out[OUT.V_air_out] = outdoor.air_flow
+    out[OUT.V_air_in] = indoor.air_flow
+    out[OUT.tank_level] = flow.level
+    out[OUT.dp_cond] = flow.dp_cond
+    out[OUT.dp_evap] = flow.dp_evap
+    out[OUT.dp_vap] = flow.dp_vap
+    out[OUT.Q_latent] = 0.0 if heating else q_latent  # the indoor coil condenses: no latent load
+    out[OUT.SHR] = 1.0 if heating else q_sensible / (q_sensible + q_latent)
     return not rates_too or bool(np.isfinite(dydt).all())
 
 
@@ -585,23 +591,56 @@ def outputs_along(ys, us, constants, tables, rates):
 
 
 class SplitUnitCycle(CycleModel):
-    """A mode of the split unit: Table III parameters, the nine outputs and this module's
-    kernels. A subclass gives the mode's state layout (where the vapour line sits), its charge
-    and start-up state, and which fan (``condenser_fan``) blows over the condensing coil."""
+    """A mode of the split unit: its hardware, Table III parameters, inputs, outputs and this
+    module's kernels. A subclass gives the mode's state layout (where the vapour line sits), its
+    charge and start-up state, which fan (``condenser_fan``) blows over the condensing coil and
+    which heat is its useful one (``capacity``)."""
 
+    hardware = SplitUnitHardware
     parameters = PARAMETERS
-    output_info = OUTPUT_INFO
-    diagnostic_info = DIAGNOSTIC_INFO
-    optional_output_ids = OPTIONAL_OUTPUT_IDS
+    inputs = INPUTS
+    outputs = OUTPUTS
     evaluate = staticmethod(evaluate)
     jacobian = staticmethod(jacobian)
     outputs_along = staticmethod(outputs_along)
     condenser_fan: ClassVar[Literal["outdoor", "indoor"]]
+    capacity: ClassVar[str]
+    """The diagnostic that is the unit's useful heat, W (what its COP divides)."""
 
     def constants(
-        self, unit: Unit, theta: np.ndarray, controller: bool | None = None
+        self, unit: UnitDescription, theta: np.ndarray, controller: bool | None = None
     ) -> np.ndarray:
         layout = self.layout(unit.discretisation.n_volumes)
         return split_unit_constants(
             unit, theta, layout, controller, condenser_fan=self.condenser_fan
         )
+
+    def summary(self, final: Mapping[str, float], tables) -> dict[str, float]:
+        """``superheat`` (K, at the suction), ``subcooling`` (K, condenser outlet),
+        ``capacity`` (W: the evaporator's heat cooling, the condenser's heating), ``COP``
+        (capacity over compressor and fan power) and ``energy_balance_error``
+        ((Q_cond - Q_evap - W_ref) / Q_cond)."""
+        capacity = final[self.capacity]
+        return {
+            "superheat": final["TS"] - saturation_state(tables, final["PS"])[0],
+            "subcooling": saturation_state(tables, final["PC"])[0] - final["TC"],
+            "capacity": capacity,
+            "COP": capacity / (final["W_comp"] + final["W_fans"]),
+            "energy_balance_error": (final["Q_cond"] - final["Q_evap"] - final["W_ref"])
+            / final["Q_cond"],
+        }
+
+    def box_ranges(self, unit: UnitDescription) -> dict[str, tuple[float, float]]:
+        """Air flow (m³/s) and fan power (W) over the box, by the fan laws at each fan's running
+        speed (``speed_fraction`` of its rated speed)."""
+        table = unit.parameters
+        hw: SplitUnitHardware = unit.hardware
+        out, ind = hw.outdoor_fan.speed_fraction, hw.indoor_fan.speed_fraction
+        return {
+            "V_air_out": (table["FO_FLOW"].low * out, table["FO_FLOW"].high * out),
+            "V_air_in": (table["FI_FLOW"].low * ind, table["FI_FLOW"].high * ind),
+            "W_fans": (
+                table["FO_POW"].low * out**3 + table["FI_POW"].low * ind**3,
+                table["FO_POW"].high * out**3 + table["FI_POW"].high * ind**3,
+            ),
+        }

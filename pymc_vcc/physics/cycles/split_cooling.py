@@ -24,7 +24,7 @@ from pymc_vcc.physics.cycles.base import (
     place_charge,
     quality_enthalpy,
 )
-from pymc_vcc.physics.cycles.split_balances import SplitUnitCycle
+from pymc_vcc.physics.cycles.split_balances import SplitUnitCycle, U
 from pymc_vcc.physics.cycles.split_unit import filled_coils
 from pymc_vcc.physics.refrigerant import p_sat_from_T, saturation_point
 
@@ -99,10 +99,14 @@ class SplitCooling(SplitUnitCycle):
         """The paper's initialisation by M0 alone: condensing 12 K above the outdoor air,
         evaporating 18 K below the indoor air, the fill level of :func:`filled_state` found
         by root-finding on the total mass (:func:`~.base.place_charge`)."""
-        p_c = p_sat_from_T(tables, inputs[2] + 12.0)
-        p_e = p_sat_from_T(tables, inputs[3] - 18.0)
+        p_c = p_sat_from_T(tables, inputs[U.T_ambient] + 12.0)
+        p_e = p_sat_from_T(tables, inputs[U.T_indoor] - 18.0)
         return place_charge(
             lambda s: filled_state(s, p_c, p_e, c, tables),
             lambda y: total_mass(y, c, tables),
             self.charge(c),
         )
+
+
+CYCLE = SplitCooling()
+"""This module's cycle, found by the registry (:mod:`pymc_vcc.physics.cycles`)."""

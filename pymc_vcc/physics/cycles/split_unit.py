@@ -1,19 +1,24 @@
-"""The split unit's components as Numba records, shared by its cooling and heating cycles.
+"""The split unit's description and its components as Numba records, shared by its cooling and
+heating cycles.
 
 Both modes run the same hardware: one compressor, one expansion valve, a suction tank (with a
-bleed hole), two coils with their fans and two connecting lines. The unit description names
-the coils by their function in the cycle's mode (``[condenser]``, ``[evaporator]``) and the
-fans by where they sit (``[outdoor_fan]``, ``[indoor_fan]``); :func:`split_unit_constants`
-turns it and a Table III vector into one record whose fields the cycle modules read by name.
-The kernels both modes share (suction tank outlet, compressor flow through the lumped pressure
-drops, a coil cell's wall heat, the start-up fill profile) are here too.
+bleed hole), two coils with their fans and two connecting lines (:class:`SplitUnitHardware`,
+one section of the unit file each). The unit description names the coils by their function in
+the cycle's mode (``[condenser]``, ``[evaporator]``) and the fans by where they sit
+(``[outdoor_fan]``, ``[indoor_fan]``); both modes take the paper's Table III parameters
+(:data:`PARAMETERS`), read the same inputs (:data:`INPUTS`) and write the same outputs
+(:data:`OUTPUTS`). :func:`split_unit_constants` turns a unit and a Table III vector into one
+record whose fields the cycle modules read by name. The kernels both modes share (suction tank
+outlet, compressor flow through the lumped pressure drops, a coil cell's wall heat, the
+start-up fill profile) are here too.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from typing import TYPE_CHECKING, Literal
+from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numba import njit
@@ -27,13 +32,155 @@ from pymc_vcc.physics.components.fan import air_capacity_rate, fan_operating_poi
 from pymc_vcc.physics.components.heat_transfer import FLUX_KINKS, cell_heat
 from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
 from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
-from pymc_vcc.physics.cycles.base import StateLayout, quality_enthalpy
-from pymc_vcc.physics.parameters import TABLE_III
+from pymc_vcc.physics.cycles.base import (
+    FRACTION,
+    InputLayout,
+    InputSpec,
+    OutputLayout,
+    StateLayout,
+    UnitDescription,
+    quality_enthalpy,
+)
 from pymc_vcc.physics.records import record_array
 from pymc_vcc.physics.refrigerant import saturation_state, state, state_values_at
 
-if TYPE_CHECKING:
-    from pymc_vcc.physics.unit import HeatExchangerGeometry, Unit
+
+@dataclass(frozen=True)
+class CompressorGeometry:
+    """Fixed compressor data (its correction factors are calibration parameters)."""
+
+    displacement: float  # m3 per revolution
+    clearance: float = field(metadata=FRACTION)  # clearance ratio of the volumetric efficiency
+    polytropic_exponent: float  # re-expansion exponent, -
+    isentropic_efficiency: float = field(metadata=FRACTION)  # -
+    # share of the losses (power above W_s) heating the gas, -
+    loss_share_to_refrigerant: float = field(metadata=FRACTION)
+    shell_ua: float  # shell heat-loss conductance to ambient, W/K
+    max_discharge_temperature: float  # thermal limit of the discharge gas, K
+    protection_pressure_start: float  # discharge pressure where the speed droop starts, Pa
+    protection_pressure_stop: float  # discharge pressure of 5 % speed, Pa
+
+
+@dataclass(frozen=True)
+class ValveGeometry:
+    """Electronic expansion valve: flow area at full opening (m2), ṁ = A a sqrt(2 ρ Δp)."""
+
+    flow_area: float
+
+
+@dataclass(frozen=True)
+class HeatExchangerGeometry:
+    """Fixed heat-exchanger data; coil length per path is a calibration parameter."""
+
+    tube_inner_diameter: float  # m
+    n_paths: int  # parallel refrigerant circuits
+    air_side_area_per_length: float  # air-side (fin and tube) area per m of tube, m2/m
+    wall_heat_capacity_per_length: float  # tube and fin heat capacity per m of tube, J/(K m)
+    nominal_mass_flow: float  # refrigerant flow at which the nominal HTCs hold, kg/s
+
+
+@dataclass(frozen=True)
+class PipeGeometry:
+    """Connecting line; its length is a calibration parameter."""
+
+    inner_diameter: float  # m
+
+
+@dataclass(frozen=True)
+class TankGeometry:
+    """Suction accumulator with a bleed (oil-return) hole in its J-tube."""
+
+    volume: float  # m3
+    # liquid mass fraction of the outflow with a full tank, -
+    bleed_fraction_full: float = field(metadata=FRACTION)
+
+
+@dataclass(frozen=True)
+class FanSettings:
+    """Fan running speed as a fraction of its rated ("nominal") speed; the fan laws scale the
+    rated flow and power (Table III) to it."""
+
+    speed_fraction: float
+
+
+@dataclass(frozen=True)
+class AirProperties:
+    """Constant moist-air properties on both coils."""
+
+    density: float  # kg/m3
+    specific_heat: float  # J/(kg K)
+
+
+@dataclass(frozen=True)
+class PressureDrop:
+    """Lumped pressure drops: Darcy friction factor of straight tube, and the ratio of a coil's
+    drop to straight-tube homogeneous friction (return bends, headers, two-phase slip)."""
+
+    darcy_friction_factor: float
+    coil_multiplier: float
+
+
+@dataclass(frozen=True)
+class SplitUnitHardware:
+    """The split unit's sections of the unit file, in the file's order (SI units)."""
+
+    compressor: CompressorGeometry
+    expansion_valve: ValveGeometry
+    condenser: HeatExchangerGeometry
+    evaporator: HeatExchangerGeometry
+    liquid_line: PipeGeometry
+    vapor_line: PipeGeometry
+    suction_tank: TankGeometry
+    outdoor_fan: FanSettings
+    indoor_fan: FanSettings
+    air: AirProperties
+    pressure_drop: PressureDrop
+
+
+PARAMETERS: tuple[tuple[str, str], ...] = (
+    ("M0", "kg"),
+    ("CF_VOL", "1"),
+    ("CF_POW", "1"),
+    ("CF_PREF", "1"),
+    ("CF_SHELL", "1"),
+    ("CF_LEV", "1"),
+    ("CF_DPC", "1"),
+    ("CF_DPE", "1"),
+    ("HTC_CV", "W/(m2 K)"),
+    ("HTC_CTP", "W/(m2 K)"),
+    ("HTC_CL", "W/(m2 K)"),
+    ("HTC_EV", "W/(m2 K)"),
+    ("HTC_ETP", "W/(m2 K)"),
+    ("HTC_EL", "W/(m2 K)"),
+    ("FO_FLOW", "m3/s"),
+    ("FO_POW", "W"),
+    ("FO_SPEED", "Hz"),
+    ("FI_FLOW", "m3/s"),
+    ("FI_POW", "W"),
+    ("FI_SPEED", "Hz"),
+    ("HTC_CA", "W/(m2 K)"),
+    ("HTC_EA", "W/(m2 K)"),
+    ("L_COND", "m"),
+    ("L_EVAP", "m"),
+    ("L_VAP", "m"),
+    ("L_LIQ", "m"),
+)
+"""(id, unit) of the split unit's 26 calibration parameters in either mode, in the order of the
+paper's Table III."""
+
+INPUTS = InputLayout(
+    [
+        InputSpec("valve_opening", "Expansion valve opening", "1", 0.02, 1.0, stepped=True),
+        InputSpec("compressor_speed", "Compressor speed", "Hz", 10.0, 150.0, stepped=True),
+        InputSpec("T_ambient", "Outdoor (ambient) air temperature", "K", 253.15, 323.15),
+        InputSpec("T_indoor", "Indoor air temperature", "K", 283.15, 313.15),
+        InputSpec("RH_indoor", "Indoor relative humidity", "1", 0.0, 1.0, default=0.0),
+    ]
+)
+"""The split unit's inputs: valve opening (fraction), compressor speed (Hz), outdoor and indoor
+air temperature (K), and optionally the indoor relative humidity (fraction; default 0: dry
+indoor air, as in the paper; with RH > 0 an evaporating indoor coil dehumidifies where it is
+below the dew point)."""
 
 COIL_RECORD = np.dtype(
     [
@@ -74,44 +221,43 @@ TANK_WIDTH = 2e3  # J/kg, tank outlet smooth max
 DP_ITERATIONS = 4  # secant steps for the flow through the lumped pressure drops
 FILL_OUTLET_QUALITY = -0.15  # condenser outlet and liquid line at start-up, fill level >= 0
 
-OUTPUT_INFO: dict[str, tuple[str, str]] = {
-    "TD": ("Compressor discharge temperature", "K"),
-    "PD": ("Compressor discharge pressure", "Pa"),
-    "TS": ("Compressor suction temperature", "K"),
-    "PS": ("Compressor suction pressure", "Pa"),
-    "TC": ("Condenser outlet refrigerant temperature", "K"),
-    "PC": ("Condenser pressure", "Pa"),
-    "TE": ("Evaporator outlet refrigerant temperature", "K"),
-    "PE": ("Evaporator pressure", "Pa"),
-    "MDOT": ("Compressor mass flow", "kg/s"),
-}
-"""The nine outputs of the paper, in order (coils named by their function in the mode)."""
-
-DIAGNOSTIC_INFO: dict[str, tuple[str, str]] = {
-    "Q_cond": ("Heat rejected by the condenser refrigerant", "W"),
-    "Q_evap": ("Heat absorbed by the evaporator refrigerant", "W"),
-    "W_comp": ("Compressor electrical power", "W"),
-    "W_ref": ("Net compressor power to the refrigerant", "W"),
-    "W_fans": ("Fan power", "W"),
-    "M": ("Total refrigerant mass", "kg"),
-    "mdot_src": ("Charge-controller mass source", "kg/s"),
-    "mdot_valve": ("Expansion-valve mass flow", "kg/s"),
-    "W_is": ("Compressor isentropic power", "W"),
-    "Q_comp_amb": ("Compressor heat to the ambient (shell, drive, thermal limit)", "W"),
-    "V_air_out": ("Outdoor-coil air flow", "m3/s"),
-    "V_air_in": ("Indoor-coil air flow", "m3/s"),
-    "tank_level": ("Suction-tank liquid volume fraction", "1"),
-    "dp_cond": ("Condenser pressure drop", "Pa"),
-    "dp_evap": ("Evaporator pressure drop", "Pa"),
-    "dp_vap": ("Vapour-line pressure drop", "Pa"),
-    "Q_latent": ("Latent heat of the indoor coil (condensation; 0 where it condenses)", "W"),
-    "SHR": ("Sensible heat ratio of the indoor coil (1 where it condenses)", "1"),
-}
-"""Further quantities after the outputs."""
-
-OPTIONAL_OUTPUT_IDS: tuple[str, ...] = ("W_comp",)
-"""Diagnostics that field loggers measure and a simulator may return as outputs (the
-compressor's electrical power makes CF_POW observable)."""
+OUTPUTS = OutputLayout(
+    {
+        "TD": ("Compressor discharge temperature", "K"),
+        "PD": ("Compressor discharge pressure", "Pa"),
+        "TS": ("Compressor suction temperature", "K"),
+        "PS": ("Compressor suction pressure", "Pa"),
+        "TC": ("Condenser outlet refrigerant temperature", "K"),
+        "PC": ("Condenser pressure", "Pa"),
+        "TE": ("Evaporator outlet refrigerant temperature", "K"),
+        "PE": ("Evaporator pressure", "Pa"),
+        "MDOT": ("Compressor mass flow", "kg/s"),
+    },
+    {
+        "Q_cond": ("Heat rejected by the condenser refrigerant", "W"),
+        "Q_evap": ("Heat absorbed by the evaporator refrigerant", "W"),
+        "W_comp": ("Compressor electrical power", "W"),
+        "W_ref": ("Net compressor power to the refrigerant", "W"),
+        "W_fans": ("Fan power", "W"),
+        "M": ("Total refrigerant mass", "kg"),
+        "mdot_src": ("Charge-controller mass source", "kg/s"),
+        "mdot_valve": ("Expansion-valve mass flow", "kg/s"),
+        "W_is": ("Compressor isentropic power", "W"),
+        "Q_comp_amb": ("Compressor heat to the ambient (shell, drive, thermal limit)", "W"),
+        "V_air_out": ("Outdoor-coil air flow", "m3/s"),
+        "V_air_in": ("Indoor-coil air flow", "m3/s"),
+        "tank_level": ("Suction-tank liquid volume fraction", "1"),
+        "dp_cond": ("Condenser pressure drop", "Pa"),
+        "dp_evap": ("Evaporator pressure drop", "Pa"),
+        "dp_vap": ("Vapour-line pressure drop", "Pa"),
+        "Q_latent": ("Latent heat of the indoor coil (condensation; 0 where it condenses)", "W"),
+        "SHR": ("Sensible heat ratio of the indoor coil (1 where it condenses)", "1"),
+    },
+    optional=("W_comp",),
+)
+"""The nine outputs of the paper (coils named by their function in the mode), then the
+diagnostics; field loggers measure the compressor's electrical power ``W_comp`` too, which
+makes CF_POW observable."""
 
 INERT_PARAMETERS: tuple[str, ...] = ("FO_SPEED", "FI_SPEED")
 """Table III parameters that change no output, by design: each fan runs at a fixed fraction of
@@ -119,9 +265,6 @@ its rated ("nominal") speed (``speed_fraction`` in the unit file), so the fan la
 flow and power from FO_FLOW/FO_POW (FI_...) alone. A separate rated speed against a fixed
 running speed would only rescale those two parameters again, which made the box span
 0.16-4.8 m³/s of outdoor air and 1.6 W-16 kW of fan power (models/README.md)."""
-
-PARAMETERS = TABLE_III
-"""The calibration parameters of the split unit in either mode (paper, Table III)."""
 
 
 @functools.cache
@@ -148,7 +291,7 @@ def split_unit_dtype(layout: StateLayout) -> np.dtype:
 
 
 def split_unit_constants(
-    unit: Unit,
+    unit: UnitDescription,
     theta: np.ndarray,
     layout: StateLayout,
     controller: bool | None,
@@ -159,39 +302,40 @@ def split_unit_constants(
     the condenser, the other the evaporator."""
     p = dict(zip((pid for pid, _ in PARAMETERS), np.asarray(theta, dtype=float), strict=True))
     n = unit.discretisation.n_volumes
+    hw: SplitUnitHardware = unit.hardware
     fans = {
         "outdoor": fan_operating_point(
             p["FO_FLOW"],
             p["FO_POW"],
             p["FO_SPEED"],
-            p["FO_SPEED"] * unit.outdoor_fan.speed_fraction,
+            p["FO_SPEED"] * hw.outdoor_fan.speed_fraction,
         ),
         "indoor": fan_operating_point(
-            p["FI_FLOW"], p["FI_POW"], p["FI_SPEED"], p["FI_SPEED"] * unit.indoor_fan.speed_fraction
+            p["FI_FLOW"], p["FI_POW"], p["FI_SPEED"], p["FI_SPEED"] * hw.indoor_fan.speed_fraction
         ),
     }
     evaporator_fan = "indoor" if condenser_fan == "outdoor" else "outdoor"
-    f = unit.pressure_drop.darcy_friction_factor
-    comp = unit.compressor
+    f = hw.pressure_drop.darcy_friction_factor
+    comp = hw.compressor
     enabled = unit.controller.enabled if controller is None else controller
     kp = unit.controller.kp if enabled else 0.0
     values = {
         "layout": layout.record,
-        "condenser": _coil(unit, unit.condenser, p, "C", n, fans[condenser_fan]),
-        "evaporator": _coil(unit, unit.evaporator, p, "E", n, fans[evaporator_fan]),
+        "condenser": _coil(hw, hw.condenser, p, "C", n, fans[condenser_fan]),
+        "evaporator": _coil(hw, hw.evaporator, p, "E", n, fans[evaporator_fan]),
         "liquid_line": {
-            "volume": pipe_volume(p["L_LIQ"], unit.liquid_line.inner_diameter),
-            "friction": friction_coefficient(f, p["L_LIQ"], unit.liquid_line.inner_diameter),
+            "volume": pipe_volume(p["L_LIQ"], hw.liquid_line.inner_diameter),
+            "friction": friction_coefficient(f, p["L_LIQ"], hw.liquid_line.inner_diameter),
         },
         "vapor_line": {
-            "volume": pipe_volume(p["L_VAP"], unit.vapor_line.inner_diameter),
-            "friction": friction_coefficient(f, p["L_VAP"], unit.vapor_line.inner_diameter),
+            "volume": pipe_volume(p["L_VAP"], hw.vapor_line.inner_diameter),
+            "friction": friction_coefficient(f, p["L_VAP"], hw.vapor_line.inner_diameter),
         },
         "tank": {
-            "volume": unit.suction_tank.volume,
-            "bleed_fraction_full": unit.suction_tank.bleed_fraction_full,
+            "volume": hw.suction_tank.volume,
+            "bleed_fraction_full": hw.suction_tank.bleed_fraction_full,
         },
-        "air_specific_heat": unit.air.specific_heat,
+        "air_specific_heat": hw.air.specific_heat,
         "compressor": {
             "displacement": comp.displacement,
             "clearance": comp.clearance,
@@ -207,14 +351,14 @@ def split_unit_constants(
             "p_protection_start": comp.protection_pressure_start,
             "p_protection_stop": comp.protection_pressure_stop,
         },
-        "valve": {"flow_area": unit.expansion_valve.flow_area, "cf_lev": p["CF_LEV"]},
+        "valve": {"flow_area": hw.expansion_valve.flow_area, "cf_lev": p["CF_LEV"]},
         "controller": {"kp": kp, "ki": kp * kp / 4.0, "m0": p["M0"]},
     }
     return record_array(split_unit_dtype(layout), values)
 
 
 def _coil(
-    unit: Unit,
+    hw: SplitUnitHardware,
     hx: HeatExchangerGeometry,
     p: dict[str, float],
     side: Literal["C", "E"],
@@ -226,7 +370,7 @@ def _coil(
     length = p["L_COND" if side == "C" else "L_EVAP"]
     tube = length * hx.n_paths
     flow, power = fan
-    drop = unit.pressure_drop
+    drop = hw.pressure_drop
     friction = friction_coefficient(
         drop.darcy_friction_factor * drop.coil_multiplier,
         length,
@@ -244,7 +388,7 @@ def _coil(
         "htc_air": p[f"HTC_{side}A"],
         "nominal_mass_flow": hx.nominal_mass_flow,
         "air_flow": flow,
-        "air_capacity": air_capacity_rate(flow, unit.air.density, unit.air.specific_heat) / n,
+        "air_capacity": air_capacity_rate(flow, hw.air.density, hw.air.specific_heat) / n,
         "fan_power": power,
         "friction": p[f"CF_DP{side}"] * friction,
     }
