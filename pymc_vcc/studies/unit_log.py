@@ -75,6 +75,13 @@ ERROR_DRAWS = 96  # draws of the model-error statistics
 SCOUTING_SHARE = 0.5  # particles and model-error draws of a round before the last
 MIN_PARTICLES = 16  # fewest SMC particles of a round
 MIN_ERROR_DRAWS = 12  # fewest model-error draws of a round (the covariance needs 10)
+RECORD_BUDGETS: dict[str, tuple[int, int]] = {
+    "smoke": (24, 12),
+    "small": (96, ERROR_DRAWS),
+    "paper": (512, 256),
+}
+"""Budget name -> (SMC particles, model-error draws) of a record's calibration."""
+
 PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
 PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in sample_stats
 
@@ -388,7 +395,7 @@ def calibrate_record(
     prior: Prior | None = None,
     parameters: Sequence[str] = (CHARGE, *NUISANCE),
     accuracy: SensorAccuracy | None = None,
-    draws: int = 128,
+    draws: int = RECORD_BUDGETS["small"][0],
     error_draws: int = ERROR_DRAWS,
     seed: int = 0,
     solver: str = "cvode",
@@ -561,13 +568,6 @@ def charge_summary(tree: xr.DataTree, interval: float = 0.95) -> dict[str, float
         "high_kg": float(high),
     }
 
-
-RECORD_BUDGETS: dict[str, tuple[int, int]] = {
-    "smoke": (24, 12),
-    "small": (128, ERROR_DRAWS),
-    "paper": (512, 256),
-}
-"""Budget name -> (SMC particles, model-error draws) of a record's calibration."""
 
 POSTERIOR_FILE = "posterior.nc"
 PRIOR_FILE = "prior.nc"
