@@ -18,7 +18,7 @@ from pathlib import Path
 from pymc_vcc import __version__
 from pymc_vcc.execution.executors import EXECUTOR_KINDS
 from pymc_vcc.inference.samplers import SAMPLERS, SMC_KERNELS
-from pymc_vcc.physics.solvers import METHODS
+from pymc_vcc.physics.integration.segments import METHODS
 
 
 def _settings(args: argparse.Namespace):

@@ -10,15 +10,15 @@ from scipy.linalg import expm
 
 from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.failures import FailureKind
-from pymc_vcc.physics.simulate import VCCSimulator, simulate
-from pymc_vcc.physics.solvers import METHODS, make_solver
-from pymc_vcc.physics.sundials import (
+from pymc_vcc.physics.integration.segments import METHODS, make_solver
+from pymc_vcc.physics.integration.sundials import (
     JAC_SIGNATURE,
     RHS_SIGNATURE,
     Callbacks,
     dense_matrix_data,
     vector_data,
 )
+from pymc_vcc.physics.simulate import VCCSimulator, simulate
 from pymc_vcc.physics.unit import load_unit
 
 # a stiff linear system y' = A y (time constants 0.01 s to 10 s), exact solution expm(A t) y0
@@ -174,7 +174,7 @@ def test_a_scikit_sundae_built_otherwise_is_refused_by_name(monkeypatch):
     another build would corrupt memory, so it is refused before anything is loaded."""
     from sksundae import _cy_common
 
-    from pymc_vcc.physics import sundials
+    from pymc_vcc.physics.integration import sundials
 
     monkeypatch.setattr(_cy_common, "SUNDIALS_INT_TYPE", "long int")
     with pytest.raises(ImportError, match=r"SUNDIALS_INT_TYPE = 'int'.*built with 'long int'"):

@@ -1,6 +1,6 @@
 """Speed and robustness of the dynamic cycle simulator, every ODE solver side by side.
 
-For each solver of :data:`~pymc_vcc.physics.solvers.METHODS` (``_<solver>`` suffix):
+For each solver of :data:`~pymc_vcc.physics.integration.segments.METHODS` (``_<solver>`` suffix):
 
 * ``sim_seconds_median``/``_min`` (wall) and ``sim_cpu_seconds_median`` (process CPU time, steadier
   on a shared machine): one 1060 s simulation of the built-in profile at nominal parameters, one
@@ -32,11 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.inputs import builtin_inputs, input_segments
+from pymc_vcc.physics.integration.callbacks import BoundCycle
+from pymc_vcc.physics.integration.segments import METHODS
 from pymc_vcc.physics.refrigerant import load_refrigerant
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
-from pymc_vcc.physics.solvers import METHODS
 from pymc_vcc.physics.unit import load_unit
 
 T_WINDOW = (0.0, 1060.0)

@@ -20,7 +20,6 @@ import numpy as np
 import xarray as xr
 from threadpoolctl import ThreadpoolController
 
-from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.cycles.base import CycleModel
 from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.inputs import (
@@ -32,9 +31,10 @@ from pymc_vcc.physics.inputs import (
     window,
     with_settling,
 )
-from pymc_vcc.physics.solvers import check_method, make_solver
+from pymc_vcc.physics.integration.callbacks import BoundCycle
+from pymc_vcc.physics.integration.segments import check_method, make_solver
+from pymc_vcc.physics.integration.warmup import ensure_compiled
 from pymc_vcc.physics.unit import Unit, load_unit
-from pymc_vcc.physics.warmup import ensure_compiled
 
 
 @functools.lru_cache(maxsize=8)
@@ -100,7 +100,7 @@ def simulate(
         Wall-clock limit in s (default: the unit's ``solver.max_wall_time``).
     solver
         ``"radau"`` (scipy, the reference) or ``"cvode"`` (SUNDIALS, faster) (default: the
-        unit's ``solver.method``), see :mod:`pymc_vcc.physics.solvers`.
+        unit's ``solver.method``), see :mod:`pymc_vcc.physics.integration.segments`.
     states
         Also return the solver's state on the grid: ``states`` over (``time``, ``state``), the
         state variables named by the cycle's layout (coordinate ``state``: ``p_cond``,

@@ -18,8 +18,8 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from pymc_vcc.physics.integration.segments import METHODS
 from pymc_vcc.physics.parameters import ParameterIds, ParameterSpec, ParameterTable, parameter_table
-from pymc_vcc.physics.solvers import METHODS
 
 if TYPE_CHECKING:
     from pymc_vcc.physics.cycles.base import CycleModel
@@ -60,7 +60,7 @@ class SolverSettings:
     output_interval: float  # s
     max_step: float  # s
     max_wall_time: float  # s, a run taking longer is flagged failed
-    method: str = "radau"  # one of pymc_vcc.physics.solvers.METHODS
+    method: str = "radau"  # one of pymc_vcc.physics.integration.segments.METHODS
 
 
 @dataclass(frozen=True)

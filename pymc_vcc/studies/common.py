@@ -33,7 +33,7 @@ from pymc_vcc.inference.priors import Prior
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.simulator import Simulator
-from pymc_vcc.physics.solvers import METHODS
+from pymc_vcc.physics.integration.segments import METHODS
 from pymc_vcc.physics.unit import Unit, load_unit
 
 T = TypeVar("T")

@@ -11,8 +11,8 @@ C callbacks.
 * ``radau``: scipy's 5th-order implicit Runge-Kutta, stepped from Python; the reference.
 * ``cvode``: SUNDIALS CVODE (BDF of orders 1 to :data:`CVODE_MAX_ORDER`, dense direct linear
   solver, Jacobian reused across steps) from scikit-sundae's libraries, calling the model's
-  Numba kernels as C callbacks (:mod:`pymc_vcc.physics.sundials`): its step loop, the model
-  and the output interpolation all run in machine code.
+  Numba kernels as C callbacks (:mod:`.sundials`): its step loop, the model and the output
+  interpolation all run in machine code.
 
 At equal tolerances BDF's error control lets more global error through than Radau's, so CVODE
 runs at :data:`CVODE_RTOL_SCALE` times the unit's rtol and :data:`CVODE_ATOL_SCALE` times its
@@ -30,8 +30,8 @@ import numpy as np
 from scipy.integrate import Radau
 from scipy.linalg import get_lapack_funcs
 
-from pymc_vcc.physics import sundials
 from pymc_vcc.physics.failures import Failure, FailureKind
+from pymc_vcc.physics.integration import sundials
 
 METHODS: tuple[str, ...] = ("radau", "cvode")
 """Solver names accepted by ``[solver] method`` in a unit file, ``simulate(solver=...)`` and
@@ -248,13 +248,13 @@ def _use_direct_lapack(solver: Radau) -> None:
 
 class CvodeSolver:
     """SUNDIALS CVODE (BDF, orders 1 to :data:`CVODE_MAX_ORDER`, dense LU) called directly, with
-    the model's C callbacks (:mod:`pymc_vcc.physics.sundials`).
+    the model's C callbacks (:mod:`pymc_vcc.physics.integration.sundials`).
 
     One CVODE instance serves every segment of a model (re-initialised at each segment's start,
     which stops it at the segment's end); the outputs come from CVODE's own interpolation in normal
     mode, so it never stops at them; a compiled loop calls CVODE for the output times (see
-    :meth:`~pymc_vcc.physics.sundials.Cvode.advance_through`), and the wall clock is read
-    between its chunks of output times; the states are checked finite once per segment.
+    :meth:`.sundials.Cvode.advance_through`), and the wall clock is read between its chunks of
+    output times; the states are checked finite once per segment.
     """
 
     calls_blas = False  # SUNDIALS' own dense LU
