@@ -1,5 +1,4 @@
-"""Unit descriptions: cycle model, fixed geometry, refrigerant, discretisation, solver settings,
-parameters.
+"""Unit descriptions: cycle model, fixed geometry, refrigerant, discretisation, parameters.
 
 A unit description is a TOML file (the built-in one ships as ``pymc_vcc/data/split_3p5kw_r410a
 .toml``; the format is documented in ``models/README.md``). ``[unit] cycle`` names its cycle
@@ -7,6 +6,7 @@ model (default ``split-cooling``) and the parameters are checked against that mo
 Loading validates it completely before any simulation runs: unknown keys, missing values,
 non-positive sizes, bounds with low >= high, nominals outside their bounds, unknown cycles and
 unknown refrigerants are errors that name the field and what is allowed. All values are SI.
+The solver is not the unit's: a simulation takes it (``simulate(..., solver=...)``).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pymc_vcc.physics.integration.segments import METHODS
+from pymc_vcc.physics.integration.solver import DEFAULT_SOLVERS, METHODS
 from pymc_vcc.physics.parameters import ParameterIds, ParameterSpec, ParameterTable, parameter_table
 
 if TYPE_CHECKING:
@@ -39,28 +39,6 @@ class Discretisation:
     """Finite volumes per heat exchanger."""
 
     n_volumes: int
-
-
-DIFFERENCING_TOLERANCE_SCALE = 0.1
-"""Solver tolerances, as a fraction of the unit's, for simulations whose outputs are
-differenced (``identifiability``'s central differences of 0.1 prior sd): a looser solver's
-error passes for information. Measured with CVODE at M0 = 1.4 over 200 s: the CF_PREF-CF_POW
-direction's expected sd ratio came out 0.53 at the unit's tolerances, 0.972 at 0.1 × them
-(0.974 with CVODE ten times tighter still)."""
-
-
-@dataclass(frozen=True)
-class SolverSettings:
-    """Solver, tolerances, output grid and limits of one simulation."""
-
-    rtol: float
-    atol_pressure: float  # Pa
-    atol_enthalpy: float  # J/kg
-    atol_temperature: float  # K
-    output_interval: float  # s
-    max_step: float  # s
-    max_wall_time: float  # s, a run taking longer is flagged failed
-    method: str = "radau"  # one of pymc_vcc.physics.integration.segments.METHODS
 
 
 @dataclass(frozen=True)
@@ -156,7 +134,6 @@ class PressureDrop:
 
 _SECTIONS: dict[str, type] = {
     "discretisation": Discretisation,
-    "solver": SolverSettings,
     "controller": ControllerSettings,
     "compressor": CompressorGeometry,
     "expansion_valve": ValveGeometry,
@@ -176,9 +153,6 @@ DEFAULT_CYCLE = "split-cooling"
 """The cycle of a unit description that names none."""
 
 _HEAD_KEYS = ["name", "description", "refrigerant", "cycle"]
-
-_CHOICES: dict[tuple[str, str], tuple[str, ...]] = {("solver", "method"): METHODS}
-"""Allowed values of the text fields."""
 
 _FRACTIONS = {
     ("compressor", "clearance"),
@@ -201,8 +175,8 @@ class Unit:
         ``R410A``, ``R32`` or ``R134a``.
     cycle
         Name of the cycle model (``split-cooling`` or ``heat-pump-heating``).
-    discretisation, solver, controller
-        Finite volumes per coil; ODE solver and tolerances; the virtual PI charge controller.
+    discretisation, controller
+        Finite volumes per coil; the virtual PI charge controller.
     compressor, expansion_valve, condenser, evaporator, liquid_line, vapor_line, suction_tank
         The components' fixed data (m, m², m³, W/K, ...).
     outdoor_fan, indoor_fan, air, pressure_drop
@@ -218,7 +192,6 @@ class Unit:
     refrigerant: str
     cycle: str
     discretisation: Discretisation
-    solver: SolverSettings
     controller: ControllerSettings
     compressor: CompressorGeometry
     expansion_valve: ValveGeometry
@@ -253,19 +226,6 @@ class Unit:
             data[section].update(values)
         return unit_from_dict(data, source=f"{self.name} (modified)")
 
-    def with_tolerances(self, scale: float) -> Unit:
-        """A copy whose solver tolerances (rtol and every atol) are ``scale`` times these, e.g.
-        :data:`DIFFERENCING_TOLERANCE_SCALE` for simulations whose outputs are differenced."""
-        if not scale > 0:
-            raise ValueError(f"tolerance scale must be positive, got {scale}")
-        solver = self.solver
-        return self.with_changes(
-            solver={
-                name: scale * getattr(solver, name)
-                for name in ("rtol", "atol_pressure", "atol_enthalpy", "atol_temperature")
-            }
-        )
-
 
 def _check_keys(
     where: str, given: dict[str, Any], allowed: list[str], optional: frozenset[str] = frozenset()
@@ -288,11 +248,7 @@ def _section(source: str, section: str, cls: type, raw: Any) -> Any:
     for f in fields(cls):
         value = raw.get(f.name, f.default)
         key = f"{where} {f.name}"
-        if f.type == "str":
-            if value not in _CHOICES[(section, f.name)]:
-                choices = list(_CHOICES[(section, f.name)])
-                raise ValueError(f"{key}: expected one of {choices}, got {value!r}")
-        elif f.type == "bool":
+        if f.type == "bool":
             if not isinstance(value, bool):
                 raise ValueError(f"{key}: expected true or false, got {value!r}")
         elif f.type == "int":
@@ -371,6 +327,8 @@ def _check_refrigerant(source: str, name: Any) -> str:
 
 def unit_from_dict(data: dict[str, Any], source: str = "unit description") -> Unit:
     """Validate a parsed unit description and build a :class:`Unit`."""
+    if "solver" in data:
+        raise ValueError(_moved_solver(source, data["solver"]))
     _check_keys(source, data, ["unit", *_SECTIONS, "parameters"])
     head = data["unit"]
     if not isinstance(head, dict):
@@ -387,6 +345,26 @@ def unit_from_dict(data: dict[str, Any], source: str = "unit description") -> Un
         cycle=model.name,
         parameters=_parameters(source, data["parameters"], model.parameters),
         **sections,
+    )
+
+
+def _moved_solver(source: str, table: Any) -> str:
+    """The one-line refusal of a unit's ``[solver]`` table: where its settings go now."""
+    given = table if isinstance(table, dict) else {}
+    method = given.get("method", METHODS[0])
+    default = DEFAULT_SOLVERS.get(method, DEFAULT_SOLVERS[METHODS[0]])
+    names = [f.name for f in fields(default) if f.name != "method"]
+    changes = "".join(
+        f", {name}={given[name]!r}"
+        for name in names
+        if name in given and given[name] != getattr(default, name)
+    )
+    return (
+        f"{source} [solver]: a unit holds no solver settings any more; delete the table and "
+        f"pass the solver per run: simulate(..., solver=get_solver({default.method!r}{changes}))"
+        f" (pymc_vcc.get_solver: a method of {list(METHODS)} at its default tolerances, with "
+        f"changes to any of {names}), or --solver {default.method} on the command line; "
+        "output_interval and max_wall_time are arguments of simulate()"
     )
 
 

@@ -28,7 +28,8 @@ from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
 
 if TYPE_CHECKING:
-    from pymc_vcc.physics.unit import SolverSettings, Unit
+    from pymc_vcc.physics.integration.solver import Solver
+    from pymc_vcc.physics.unit import Unit
 
 N_PROPERTIES = 5
 """Rows of a cell-property array: T (K), ρ (kg/m³), ∂ρ/∂p, ∂ρ/∂h, quality."""
@@ -135,8 +136,8 @@ class StateLayout:
         """The SI unit of each state variable (:data:`BLOCK_UNITS`)."""
         return tuple(BLOCK_UNITS[block.kind] for block in self.blocks for _ in range(block.size))
 
-    def tolerances(self, solver: SolverSettings) -> np.ndarray:
-        """Absolute tolerances of the state, by block kind, from the unit's solver settings."""
+    def tolerances(self, solver: Solver) -> np.ndarray:
+        """Absolute tolerances of the state, by block kind, from the solver's."""
         by_kind = {
             BlockKind.PRESSURE: solver.atol_pressure,
             BlockKind.ENTHALPY: solver.atol_enthalpy,
