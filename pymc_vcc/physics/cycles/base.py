@@ -34,9 +34,6 @@ if TYPE_CHECKING:
 N_PROPERTIES = 5
 """Rows of a cell-property array: T (K), ρ (kg/m³), ∂ρ/∂p, ∂ρ/∂h, quality."""
 
-INTEGRAL_ATOL = 1e-4
-"""Absolute tolerance of a controller integral, kg s."""
-
 
 class BlockKind(StrEnum):
     """What a block of the state holds; sets its tolerance and its role in a zone."""
@@ -142,7 +139,7 @@ class StateLayout:
             BlockKind.PRESSURE: solver.atol_pressure,
             BlockKind.ENTHALPY: solver.atol_enthalpy,
             BlockKind.TEMPERATURE: solver.atol_temperature,
-            BlockKind.INTEGRAL: INTEGRAL_ATOL,
+            BlockKind.INTEGRAL: solver.atol_integral,
         }
         atol = np.empty(self.size)
         for block in self.blocks:

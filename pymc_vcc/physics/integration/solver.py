@@ -36,8 +36,9 @@ class Solver:
         ``"radau"`` or ``"cvode"`` (:data:`METHODS`).
     rtol
         Relative tolerance, -.
-    atol_pressure, atol_enthalpy, atol_temperature
-        Absolute tolerances of the pressure (Pa), enthalpy (J/kg) and temperature (K) states.
+    atol_pressure, atol_enthalpy, atol_temperature, atol_integral
+        Absolute tolerances of the pressure (Pa), enthalpy (J/kg), temperature (K) and
+        controller-integral (kg s) states.
     max_step
         Largest step, s.
     """
@@ -47,6 +48,7 @@ class Solver:
     atol_pressure: float  # Pa
     atol_enthalpy: float  # J/kg
     atol_temperature: float  # K
+    atol_integral: float  # kg s
     max_step: float  # s
 
     def __post_init__(self) -> None:
@@ -60,7 +62,8 @@ class Solver:
                 raise ValueError(f"solver {name}: expected a finite positive number, got {value!r}")
 
     def scaled(self, factor: float) -> Solver:
-        """The same solver with its rtol and every atol ``factor`` times these, e.g.
+        """The same solver with its rtol and every atol ``factor`` times these (the largest
+        step unchanged), e.g.
         :data:`DIFFERENCING_TOLERANCE_SCALE` for simulations whose outputs are differenced."""
         if not factor > 0:
             raise ValueError(f"tolerance scale must be positive, got {factor}")
@@ -75,31 +78,37 @@ class Solver:
 
 
 _NUMBERS = tuple(f.name for f in fields(Solver) if f.name != "method")
-_TOLERANCES = ("rtol", "atol_pressure", "atol_enthalpy", "atol_temperature")
+_ATOLS = tuple(name for name in _NUMBERS if name.startswith("atol_"))
+_TOLERANCES = ("rtol", *_ATOLS)
 
 RADAU = Solver(
     "radau", rtol=1e-4, atol_pressure=20.0, atol_enthalpy=5.0, atol_temperature=0.01,
-    max_step=60.0,
+    atol_integral=1e-4, max_step=60.0,
 )  # fmt: skip
 """Radau's default. With the enthalpy atol at 5 J/kg the total mass holds within 1e-4 of M0
 over 200 box draws (one draw's start-up reached 1.2e-4 at 10 J/kg, 2.5e-5 at 5 J/kg;
 ``models/README.md``)."""
 
+CVODE_RTOL_SCALE = 0.1
+"""CVODE's default rtol as a fraction of Radau's. Over nominal and 40 box draws (1060 s, against
+CVODE at a thousandth of Radau's default tolerances) the largest error is 1.2e-3 of an output's
+range at the median and 3.3e-3 at the 90th percentile, against Radau's 2.0e-3 and 6.6e-3; at
+0.2 × it is Radau's (2.1e-3, 6.8e-3)."""
+
+CVODE_ATOL_SCALE = 0.01
+"""CVODE's default atols as a fraction of Radau's. Over 200 box draws (seed 2026, 1060 s) the
+total mass stays within 7.8e-5 of M0 (median 1.7e-5), as with both scales at 0.03 × (7.8e-5,
+median 9.3e-6), which took 14 % more right-hand sides; with the atols at 0.03 × and the rtol at
+0.1 × it drifted up to 1.6e-4 over 100 of them, with both at 0.1 × up to 3.7e-4."""
+
 CVODE = Solver(
-    "cvode", rtol=1e-5, atol_pressure=0.2, atol_enthalpy=0.05, atol_temperature=1e-4,
-    max_step=60.0,
-)  # fmt: skip
-"""CVODE's default: a tenth of Radau's rtol and a hundredth of its atols.
-
-The rtol: over nominal and 40 box draws (1060 s, against CVODE at a thousandth of Radau's
-default tolerances) the largest error is 1.2e-3 of an output's range at the median and 3.3e-3
-at the 90th percentile, against Radau's 2.0e-3 and 6.6e-3; at 0.2 × Radau's it is Radau's
-(2.1e-3, 6.8e-3).
-
-The atols: over 200 box draws (seed 2026, 1060 s) the total mass stays within 7.8e-5 of M0
-(median 1.7e-5), as with every tolerance at 0.03 × Radau's (7.8e-5, median 9.3e-6), which took
-14 % more right-hand sides; with the atols at 0.03 × and the rtol at 0.1 × it drifted up to
-1.6e-4 over 100 of them, with all at 0.1 × up to 3.7e-4."""
+    "cvode",
+    rtol=CVODE_RTOL_SCALE * RADAU.rtol,
+    **{name: CVODE_ATOL_SCALE * getattr(RADAU, name) for name in _ATOLS},
+    max_step=RADAU.max_step,
+)
+"""CVODE's default: :data:`CVODE_RTOL_SCALE` times Radau's rtol, :data:`CVODE_ATOL_SCALE` times
+its atols (at equal tolerances BDF's error control lets more global error through)."""
 
 DEFAULT_SOLVERS: dict[str, Solver] = {solver.method: solver for solver in (RADAU, CVODE)}
 """Each method's default solver, by name."""
