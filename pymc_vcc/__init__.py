@@ -27,6 +27,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.physics.cycles": ("OUTPUT_IDS", "CYCLE_MODELS", "CycleModel"),
     "pymc_vcc.physics.failures": ("FailureKind",),
     "pymc_vcc.physics.simulate": ("VCCSimulator", "operating_point"),
+    "pymc_vcc.physics.integration.solver": ("Solver", "get_solver"),
     "pymc_vcc.inference.simulator": ("Simulator", "check_simulator"),
     "pymc_vcc.io.measurements": (
         "load_measurements",

@@ -18,7 +18,7 @@ from pathlib import Path
 from pymc_vcc import __version__
 from pymc_vcc.execution.executors import EXECUTOR_KINDS
 from pymc_vcc.inference.samplers import SAMPLERS, SMC_KERNELS
-from pymc_vcc.physics.solvers import METHODS
+from pymc_vcc.physics.integration.solver import METHODS
 
 
 def _settings(args: argparse.Namespace):
@@ -314,8 +314,8 @@ def _add_run_options(parser: argparse.ArgumentParser, out: str) -> None:
     parser.add_argument(
         "--solver",
         choices=list(METHODS),
-        help="ODE solver: radau (scipy, the reference) or cvode (SUNDIALS, faster) "
-        "(default: the unit's [solver] method)",
+        help="ODE solver at its default tolerances: radau (scipy, the reference) or cvode "
+        "(SUNDIALS, faster) (default: the study's own, radau unless it says otherwise)",
     )
     parser.add_argument(
         "--json",

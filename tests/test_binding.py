@@ -5,8 +5,8 @@ import numba
 import numpy as np
 import pytest
 
-from pymc_vcc.physics.binding import bind, numba_type
 from pymc_vcc.physics.cycles import CYCLE_MODELS
+from pymc_vcc.physics.integration.binding import bind, numba_type
 from pymc_vcc.physics.refrigerant import load_refrigerant
 from pymc_vcc.physics.unit import HEAT_PUMP_UNIT, load_unit
 

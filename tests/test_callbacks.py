@@ -5,12 +5,12 @@ import ctypes
 import numpy as np
 from numba import njit
 
-from pymc_vcc.physics.callbacks import BoundCycle, _table_record, tables_at
 from pymc_vcc.physics.inputs import builtin_inputs, input_segments
+from pymc_vcc.physics.integration.callbacks import BoundCycle, _table_record, tables_at
+from pymc_vcc.physics.integration.sundials import as_pointer, dense_matrix_data, library
+from pymc_vcc.physics.integration.warmup import ensure_compiled
 from pymc_vcc.physics.refrigerant import load_refrigerant
-from pymc_vcc.physics.sundials import as_pointer, dense_matrix_data, library
 from pymc_vcc.physics.unit import HEAT_PUMP_UNIT, load_unit
-from pymc_vcc.physics.warmup import ensure_compiled
 
 _RHS = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_double, *(ctypes.c_void_p,) * 3)
 _JAC = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_double, *(ctypes.c_void_p,) * 7)

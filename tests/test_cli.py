@@ -54,7 +54,7 @@ def test_solver_and_sampler_options():
         ["estimate", "--method", "smc", "--solver", "cvode", "--epsilon", "0.02"]
     )
     assert (args.method, args.solver, args.epsilon, args.particles) == ("smc", "cvode", 0.02, None)
-    assert build_parser().parse_args(["leak"]).solver is None  # the unit's own choice
+    assert build_parser().parse_args(["leak"]).solver is None  # the study's own choice
     with pytest.raises(SystemExit):
         build_parser().parse_args(["sobol", "--solver", "euler"])
 

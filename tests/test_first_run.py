@@ -59,7 +59,7 @@ def test_the_first_run_with_an_empty_cache_passes_and_matches_a_warm_one(tmp_pat
 
 SECOND_RUN = textwrap.dedent(
     """
-    from pymc_vcc.physics import callbacks
+    from pymc_vcc.physics.integration import callbacks
     from pymc_vcc.physics.simulate import simulate
 
     made = []
@@ -75,7 +75,7 @@ STALE_CACHE = textwrap.dedent(
     """
     import sys
     from pathlib import Path
-    from pymc_vcc.physics import warmup
+    from pymc_vcc.physics.integration import warmup
     from pymc_vcc.physics.components.smooth import smooth_pos
 
     smooth_pos(1.0, 0.1)  # compiled and cached

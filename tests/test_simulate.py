@@ -11,8 +11,8 @@ from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.cycles.split_unit import INERT_PARAMETERS
 from pymc_vcc.physics.failures import FailureKind
 from pymc_vcc.physics.inputs import builtin_inputs, constant_inputs
+from pymc_vcc.physics.integration.solver import METHODS
 from pymc_vcc.physics.simulate import VCCSimulator, operating_point, simulate
-from pymc_vcc.physics.solvers import METHODS
 from pymc_vcc.physics.unit import load_unit
 
 RATED_CAPACITY = 3500.0  # W

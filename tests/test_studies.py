@@ -453,9 +453,27 @@ def test_the_validation_study_simulates_with_the_settings_solver(monkeypatch):
     class Stop(Exception):
         pass
 
-    def capture(unit, *args, **kwargs):
-        raise Stop(unit.solver.method)
+    def capture(unit, *args, solver=None, **kwargs):
+        raise Stop(str(solver))
 
     monkeypatch.setattr(validation, "VCCSimulator", capture)
     with pytest.raises(Stop, match="cvode"):
         validation.validation_study(StudySettings(solver="cvode"), methods=["ks"])
+
+
+def test_the_identify_study_differences_at_a_tenth_of_the_settings_solvers_tolerances(
+    monkeypatch,
+):
+    from pymc_vcc.physics.integration.solver import CVODE, DIFFERENCING_TOLERANCE_SCALE
+    from pymc_vcc.studies import identify
+
+    class Stop(Exception):
+        pass
+
+    def capture(unit, *args, solver=None, **kwargs):
+        raise Stop(solver)
+
+    monkeypatch.setattr(identify, "VCCSimulator", capture)
+    with pytest.raises(Stop) as stopped:
+        identify.identify_study(StudySettings(solver="cvode"))
+    assert stopped.value.args[0] == CVODE.scaled(DIFFERENCING_TOLERANCE_SCALE)

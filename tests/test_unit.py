@@ -45,7 +45,6 @@ def _mutated(mutate):
     ("mutate", "message"),
     [
         (lambda d: d["condenser"].update(fins=3), r"\[condenser\]: unknown key\(s\) \['fins'\]"),
-        (lambda d: d["solver"].pop("rtol"), r"\[solver\]: missing value\(s\) for \['rtol'\]"),
         (lambda d: d.update(extra={}), r"unknown key\(s\) \['extra'\]"),
         (lambda d: d["discretisation"].update(n_volumes=0), "positive integer"),
         (lambda d: d["suction_tank"].update(volume=-1.0), "finite positive"),
@@ -71,10 +70,6 @@ def _mutated(mutate):
             r"\[unit\] cycle: unknown cycle 'chiller'; allowed cycles are",
         ),
         (lambda d: d["unit"].update(cycle=3), r"\[unit\] cycle: expected a name, got 3"),
-        (
-            lambda d: d["solver"].update(method="euler"),
-            r"\[solver\] method: expected one of \['radau', 'cvode'\], got 'euler'",
-        ),
     ],
 )
 def test_bad_unit_descriptions_are_clear_errors(mutate, message):
@@ -89,11 +84,18 @@ def test_invalid_toml_is_reported(tmp_path):
         load_unit(path)
 
 
-def test_solver_method_is_optional_and_defaults_to_radau():
-    data = _builtin_dict()
-    data["solver"].pop("method")
-    assert unit_from_dict(data).solver.method == "radau"
-    assert load_unit().with_changes(solver={"method": "cvode"}).solver.method == "cvode"
+def test_a_solver_table_is_refused_in_one_line_saying_where_it_goes():
+    table = {"method": "cvode", "rtol": 1e-5, "atol_enthalpy": 20.0, "output_interval": 1.0}
+    data = _builtin_dict() | {"solver": table}
+    with pytest.raises(ValueError) as refused:
+        unit_from_dict(data, source="my.toml")
+    message = str(refused.value)
+    assert "\n" not in message
+    assert message.startswith("my.toml [solver]: a unit holds no solver settings any more")
+    # the table's own values where they differ from the method's default (CVODE's rtol is 1e-5)
+    assert "simulate(..., solver=get_solver('cvode', atol_enthalpy=20.0))" in message
+    assert "['radau', 'cvode']" in message and "output_interval and max_wall_time" in message
+    assert "--solver cvode" in message
 
 
 def test_with_changes_validates():
@@ -103,16 +105,6 @@ def test_with_changes_validates():
         unit.with_changes(discretisation={"n_volumes": -2})
     with pytest.raises(ValueError, match="unknown section"):
         unit.with_changes(nonsense={"a": 1})
-
-
-def test_with_tolerances_scales_rtol_and_every_atol_alone():
-    unit = load_unit()
-    tight = unit.with_tolerances(0.1)
-    for name in ("rtol", "atol_pressure", "atol_enthalpy", "atol_temperature"):
-        assert getattr(tight.solver, name) == pytest.approx(0.1 * getattr(unit.solver, name))
-    assert tight.solver.max_step == unit.solver.max_step and tight.parameters == unit.parameters
-    with pytest.raises(ValueError, match="tolerance scale must be positive, got 0"):
-        unit.with_tolerances(0)
 
 
 def test_the_worked_example_of_models_readme_loads_and_runs():

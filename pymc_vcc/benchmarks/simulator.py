@@ -1,6 +1,6 @@
 """Speed and robustness of the dynamic cycle simulator, every ODE solver side by side.
 
-For each solver of :data:`~pymc_vcc.physics.solvers.METHODS` (``_<solver>`` suffix):
+For each solver of :data:`~pymc_vcc.physics.integration.solver.METHODS` (``_<solver>`` suffix):
 
 * ``sim_seconds_median``/``_min`` (wall) and ``sim_cpu_seconds_median`` (process CPU time, steadier
   on a shared machine): one 1060 s simulation of the built-in profile at nominal parameters, one
@@ -13,7 +13,7 @@ For each solver of :data:`~pymc_vcc.physics.solvers.METHODS` (``_<solver>`` suff
 Then ``speedup_<solver>`` (Radau's median over the solver's), ``parallel_speedup_<fastest>`` (the
 box sweep on all cores over the same sweep on one; meaningful only on an otherwise idle
 machine, so ``load_average`` (1 min, at the start) is reported beside it), and, unsuffixed as
-before, the unit's default solver's figures.
+before, the default solver's figures.
 
 What the model itself costs, with no solver (:func:`_model_costs`): ``model_rhs_us``,
 ``model_jacobian_ms`` and ``model_outputs_ms`` (the outputs on the whole grid), and per solver
@@ -32,11 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.inputs import builtin_inputs, input_segments
+from pymc_vcc.physics.integration.callbacks import BoundCycle
+from pymc_vcc.physics.integration.solver import METHODS, get_solver
 from pymc_vcc.physics.refrigerant import load_refrigerant
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
-from pymc_vcc.physics.solvers import METHODS
 from pymc_vcc.physics.unit import load_unit
 
 T_WINDOW = (0.0, 1060.0)
@@ -177,7 +177,7 @@ def run(quick: bool) -> dict[str, float | int | str]:
     fastest = min(per_solver, key=lambda name: per_solver[name]["sim_seconds_median"])
     one_core = _sweep(fastest, draws, 1)["sims_per_second"]
     results[f"parallel_speedup_{fastest}"] = per_solver[fastest]["sims_per_second"] / one_core
-    return results | per_solver[unit.solver.method]
+    return results | per_solver[get_solver().method]
 
 
 SIDE_BY_SIDE = (

@@ -214,9 +214,9 @@ def identifiability(
         simulator: ``simulator(theta, rng) -> outputs`` (a
             :class:`~pymc_vcc.physics.simulate.VCCSimulator`: its window, inputs and outputs
             are those of the data). Its error must be small beside the output changes of
-            ``step`` prior sd, or it passes for information: for the cycle model, a unit
-            ``with_tolerances(DIFFERENCING_TOLERANCE_SCALE)`` (see
-            :mod:`pymc_vcc.physics.unit`), as the studies use.
+            ``step`` prior sd, or it passes for information: for the cycle model, a solver
+            ``scaled(DIFFERENCING_TOLERANCE_SCALE)`` (see
+            :mod:`pymc_vcc.physics.integration.solver`), as the studies use.
         sensor_noise: the sensors' noise (its ``learnable`` flag is ignored).
         at: the point, SI units; parameters not given take the simulator's defaults
             (nominal), and the perturbed ones must be given unless the simulator has bounds

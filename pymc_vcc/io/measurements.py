@@ -542,7 +542,7 @@ def load_measurements(
             with slashes, day first with dots). Zone-less times are taken as UTC.
         decimal: the decimal mark (``"."`` or ``","``); default: ``","`` if the file is not
             comma-separated and its numbers are written with a comma, else ``"."``.
-        dt: spacing of the simulation grid, s (the unit's ``solver.output_interval``).
+        dt: spacing of the simulation grid, s (``simulate``'s default output interval).
         max_gap: longest stretch without samples that interpolation may bridge, s.
         input_hold: inputs are held constant over blocks of this length, s (a multiple of dt);
             a step of a commanded input (:data:`STEPPED_INPUTS`) starts a new block.

@@ -20,7 +20,6 @@ import numpy as np
 import xarray as xr
 from threadpoolctl import ThreadpoolController
 
-from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.cycles.base import CycleModel
 from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.inputs import (
@@ -30,9 +29,17 @@ from pymc_vcc.physics.inputs import (
     window,
     with_settling,
 )
-from pymc_vcc.physics.solvers import check_method, make_solver
+from pymc_vcc.physics.integration.callbacks import BoundCycle
+from pymc_vcc.physics.integration.segments import make_solver
+from pymc_vcc.physics.integration.solver import Solver, get_solver
+from pymc_vcc.physics.integration.warmup import ensure_compiled
 from pymc_vcc.physics.unit import Unit, load_unit
-from pymc_vcc.physics.warmup import ensure_compiled
+
+OUTPUT_INTERVAL = 1.0
+"""Default spacing of the output grid, s."""
+
+MAX_WALL_TIME = 20.0
+"""Default wall-clock limit of one simulation, s: a run taking longer is flagged failed."""
 
 
 @functools.lru_cache(maxsize=8)
@@ -66,11 +73,11 @@ def simulate(
     inputs: xr.Dataset | None = None,
     *,
     t_end: float | None = None,
-    output_interval: float | None = None,
+    output_interval: float = OUTPUT_INTERVAL,
     controller: bool | None = None,
     diagnostics: bool = False,
-    max_wall_time: float | None = None,
-    solver: str | None = None,
+    max_wall_time: float = MAX_WALL_TIME,
+    solver: str | Solver | None = None,
     states: bool = False,
 ) -> xr.Dataset:
     """Simulate the cycle and return the nine outputs on a regular time grid.
@@ -88,17 +95,18 @@ def simulate(
     t_end
         Simulate ``[0, t_end]`` s only (default: the whole profile).
     output_interval
-        Output grid spacing, s (default: the unit's ``solver.output_interval``).
+        Output grid spacing, s (default :data:`OUTPUT_INTERVAL`).
     controller
         Switch the virtual PI charge controller on/off (default: the unit's setting).
     diagnostics
         Also return heats, powers, total mass and controller source (the diagnostics of the
         cycle model's ``outputs``).
     max_wall_time
-        Wall-clock limit in s (default: the unit's ``solver.max_wall_time``).
+        Wall-clock limit in s (default :data:`MAX_WALL_TIME`).
     solver
-        ``"radau"`` (scipy, the reference) or ``"cvode"`` (SUNDIALS, faster) (default: the
-        unit's ``solver.method``), see :mod:`pymc_vcc.physics.solvers`.
+        A :class:`~pymc_vcc.physics.integration.solver.Solver`, or ``"radau"`` (scipy, the
+        reference; the default) or ``"cvode"`` (SUNDIALS, faster) at that method's default
+        tolerances.
     states
         Also return the solver's state on the grid: ``states`` over (``time``, ``state``), the
         state variables named by the cycle's layout (coordinate ``state``: ``p_cond``,
@@ -120,11 +128,11 @@ def simulate(
     if t_end is not None:
         inputs = window(inputs, float(t_end))
     theta = unit.parameters.vector(params)
-    dt = unit.solver.output_interval if output_interval is None else float(output_interval)
+    dt = float(output_interval)
     if not dt > 0:
         raise ValueError(f"output_interval must be positive, got {dt}")
-    limit = unit.solver.max_wall_time if max_wall_time is None else float(max_wall_time)
-    method = check_method(unit.solver.method if solver is None else solver)
+    limit = float(max_wall_time)
+    solver = get_solver(solver)
 
     started = time.perf_counter()
     edges, held = input_segments(inputs, model.inputs)
@@ -133,13 +141,13 @@ def simulate(
     n = unit.discretisation.n_volumes
     layout = model.layout(n)
     c = model.constants(unit, theta, controller)
-    atol = layout.tolerances(unit.solver)
+    atol = layout.tolerances(solver)
 
     on_grid = np.full((times.size, layout.size), np.nan)
     controls = np.empty((times.size, len(model.inputs)))
     segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
     controls[:] = held[segment_of]
-    stepper = make_solver(method, unit.solver.rtol, atol, unit.solver.max_step, limit)
+    stepper = make_solver(solver, atol, limit)
     failure: Failure | None = None
     try:
         y = model.initial_state(c, n, held[0], tables)
@@ -189,7 +197,7 @@ def simulate(
             "n_rhs": stepper.counters.n_rhs,
             "n_jac": stepper.counters.n_jac,
             "n_steps": stepper.counters.n_steps,
-            "solver": method,
+            "solver": str(solver),
             "n_states": layout.size,
             "wall_time": time.perf_counter() - started,
             "mass_error": mass_error,
@@ -242,8 +250,8 @@ class VCCSimulator:
     outputs from ``t_start`` on. ``parameters`` names the ids a sampler calibrates (default: all
     26); the others stay at nominal, or at ``fixed`` values. Samplers refuse priors reaching
     outside the unit's parameter bounds (``parameter_bounds``) unless
-    ``allow_outside_unit_bounds=True`` (extrapolation). ``solver`` picks the ODE solver
-    (default: the unit's ``solver.method``).
+    ``allow_outside_unit_bounds=True`` (extrapolation). ``solver`` picks the ODE solver and
+    its tolerances.
 
     Parameters
     ----------
@@ -260,7 +268,7 @@ class VCCSimulator:
     controller
         Switch the virtual PI charge controller on/off (default: the unit's setting).
     max_wall_time
-        Wall-clock limit of one simulation, s (default: the unit's ``solver.max_wall_time``).
+        Wall-clock limit of one simulation, s (default :data:`MAX_WALL_TIME`).
     parameters
         Ids a sampler calibrates (default: all of the unit's).
     fixed
@@ -268,7 +276,8 @@ class VCCSimulator:
     allow_outside_unit_bounds
         Let priors reach outside the unit's parameter bounds.
     solver
-        ``"radau"`` or ``"cvode"`` (default: the unit's ``solver.method``).
+        A :class:`~pymc_vcc.physics.integration.solver.Solver`, or ``"radau"`` (the default) or
+        ``"cvode"`` at that method's default tolerances.
     settle
         Seconds run at the profile's first inputs before it starts (not returned; times
         start at 0 s), so that a record of a running unit starts from its steady state
@@ -283,11 +292,11 @@ class VCCSimulator:
         t_window: tuple[float, float] | None = None,
         *,
         controller: bool | None = None,
-        max_wall_time: float | None = None,
+        max_wall_time: float = MAX_WALL_TIME,
         parameters: Sequence[str] | None = None,
         fixed: Mapping[str, float] | None = None,
         allow_outside_unit_bounds: bool = False,
-        solver: str | None = None,
+        solver: str | Solver | None = None,
         settle: float = 0.0,
     ) -> None:
         self.unit = load_unit() if unit is None else unit
@@ -322,8 +331,7 @@ class VCCSimulator:
         self._run_inputs = with_settling(self._run_inputs, self.settle)
         self.controller = controller
         self.max_wall_time = max_wall_time
-        self.solver = solver
-        check_method(self.unit.solver.method if solver is None else solver)
+        self.solver = get_solver(solver)
         self.allow_outside_unit_bounds = allow_outside_unit_bounds
         ensure_compiled(self.unit)
 
@@ -335,11 +343,10 @@ class VCCSimulator:
     def checkpoint_identity(self) -> str:
         """What a checkpoint records of this simulator, so that a resume with another unit,
         solver, window or fixed values is refused rather than mixed in."""
-        solver = self.solver or self.unit.solver.method
         fixed = ", ".join(f"{name}={value:g}" for name, value in sorted(self.fixed.items()))
         settling = f", settled {self.settle:g} s" if self.settle else ""
         return (
-            f"unit {self.unit.name!r}, solver {solver}, window {self.t_window} s, "
+            f"unit {self.unit.name!r}, solver {self.solver}, window {self.t_window} s, "
             f"controller {self.controller}, fixed {{{fixed}}}{settling}"
         )
 
@@ -394,7 +401,7 @@ def operating_point(
     *,
     duration: float = 1500.0,
     controller: bool | None = None,
-    solver: str | None = None,
+    solver: str | Solver | None = None,
     **conditions: float,
 ) -> dict[str, float | str]:
     """The (near) steady state reached after ``duration`` s at constant inputs.
@@ -419,7 +426,8 @@ def operating_point(
     controller
         Switch the virtual PI charge controller on/off (default: the unit's setting).
     solver
-        ``"radau"`` or ``"cvode"`` (default: the unit's ``solver.method``).
+        A :class:`~pymc_vcc.physics.integration.solver.Solver` or a method name (default:
+        ``"radau"``), as for :func:`simulate`.
     **conditions
         Inputs that differ from the unit's ``[rating]`` point, SI (K, Hz, fractions).
     """

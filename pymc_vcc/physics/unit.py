@@ -1,15 +1,16 @@
-"""Unit descriptions: cycle model, fixed hardware, refrigerant, discretisation, solver settings,
-rating point, parameters.
+"""Unit descriptions: cycle model, fixed hardware, refrigerant, discretisation, rating
+point, parameters.
 
 A unit description is a TOML file (the built-in one ships as ``pymc_vcc/data/split_3p5kw_r410a
 .toml``; the format is documented in ``models/README.md``). ``[unit] cycle`` names its cycle
 model (default ``split-cooling``), which declares the rest: the sections of its hardware
 (:attr:`~pymc_vcc.physics.cycles.base.CycleModel.hardware`), its inputs (the keys of
-``[rating]``) and its parameter table. Every unit has ``[discretisation]``, ``[solver]`` and
+``[rating]``) and its parameter table. Every unit has ``[discretisation]`` and
 ``[controller]``. Loading validates it completely before any simulation runs: unknown keys,
 missing values, non-positive sizes, bounds with low >= high, nominals outside their bounds,
 unknown cycles and unknown refrigerants are errors that name the field and what is allowed. All
-values are SI.
+values are SI. The solver is not the unit's: a simulation takes it
+(``simulate(..., solver=...)``).
 """
 
 from __future__ import annotations
@@ -29,8 +30,8 @@ from pymc_vcc.physics.cycles.base import (
     InputLayout,
     is_fraction,
 )
+from pymc_vcc.physics.integration.solver import DEFAULT_SOLVERS, METHODS
 from pymc_vcc.physics.parameters import ParameterIds, ParameterSpec, ParameterTable, parameter_table
-from pymc_vcc.physics.solvers import METHODS
 
 BUILTIN_UNIT = "split_3p5kw_r410a.toml"
 """File name of the built-in unit description inside ``pymc_vcc/data``."""
@@ -42,31 +43,8 @@ SHIPPED_UNITS = (BUILTIN_UNIT, HEAT_PUMP_UNIT)
 """File names of the units shipped inside ``pymc_vcc/data``, which :func:`load_unit` accepts."""
 
 
-DIFFERENCING_TOLERANCE_SCALE = 0.1
-"""Solver tolerances, as a fraction of the unit's, for simulations whose outputs are
-differenced (``identifiability``'s central differences of 0.1 prior sd): a looser solver's
-error passes for information. Measured with CVODE at M0 = 1.4 over 200 s: the CF_PREF-CF_POW
-direction's expected sd ratio came out 0.53 at the unit's tolerances, 0.972 at 0.1 × them
-(0.974 with CVODE ten times tighter still)."""
-
-
-@dataclass(frozen=True)
-class SolverSettings:
-    """Solver, tolerances, output grid and limits of one simulation."""
-
-    rtol: float
-    atol_pressure: float  # Pa
-    atol_enthalpy: float  # J/kg
-    atol_temperature: float  # K
-    output_interval: float  # s
-    max_step: float  # s
-    max_wall_time: float  # s, a run taking longer is flagged failed
-    method: str = "radau"  # one of pymc_vcc.physics.solvers.METHODS
-
-
 _SECTIONS: dict[str, type] = {
     "discretisation": Discretisation,
-    "solver": SolverSettings,
     "controller": ControllerSettings,
 }
 """The sections every unit has; its cycle model adds its hardware's, then ``[rating]``."""
@@ -75,9 +53,6 @@ DEFAULT_CYCLE = "split-cooling"
 """The cycle of a unit description that names none."""
 
 _HEAD_KEYS = ["name", "description", "refrigerant", "cycle"]
-
-_CHOICES: dict[tuple[str, str], tuple[str, ...]] = {("solver", "method"): METHODS}
-"""Allowed values of the text fields."""
 
 
 @dataclass(frozen=True)
@@ -93,8 +68,8 @@ class Unit:
         ``R410A``, ``R32`` or ``R134a``.
     cycle
         Name of the cycle model (one of :data:`~pymc_vcc.physics.cycles.CYCLE_MODELS`).
-    discretisation, solver, controller
-        Finite volumes per coil; ODE solver and tolerances; the virtual PI charge controller.
+    discretisation, controller
+        Finite volumes per coil; the virtual PI charge controller.
     hardware
         The cycle's sections (an instance of its model's ``hardware``; for the split unit
         ``compressor``, ``condenser``, ``outdoor_fan``, ... with their fixed data, m, m², W/K).
@@ -110,7 +85,6 @@ class Unit:
     refrigerant: str
     cycle: str
     discretisation: Discretisation
-    solver: SolverSettings
     controller: ControllerSettings
     hardware: Any
     rating: dict[str, float] = field(hash=False)  # compared, but a unit stays hashable
@@ -134,19 +108,6 @@ class Unit:
             data[section].update(values)
         return unit_from_dict(data, source=f"{self.name} (modified)")
 
-    def with_tolerances(self, scale: float) -> Unit:
-        """A copy whose solver tolerances (rtol and every atol) are ``scale`` times these, e.g.
-        :data:`DIFFERENCING_TOLERANCE_SCALE` for simulations whose outputs are differenced."""
-        if not scale > 0:
-            raise ValueError(f"tolerance scale must be positive, got {scale}")
-        solver = self.solver
-        return self.with_changes(
-            solver={
-                name: scale * getattr(solver, name)
-                for name in ("rtol", "atol_pressure", "atol_enthalpy", "atol_temperature")
-            }
-        )
-
 
 def _check_keys(
     where: str, given: dict[str, Any], allowed: list[str], optional: frozenset[str] = frozenset()
@@ -169,11 +130,7 @@ def _section(source: str, section: str, cls: type, raw: Any) -> Any:
     for f in fields(cls):
         value = raw.get(f.name, f.default)
         key = f"{where} {f.name}"
-        if f.type == "str":
-            if value not in _CHOICES[(section, f.name)]:
-                choices = list(_CHOICES[(section, f.name)])
-                raise ValueError(f"{key}: expected one of {choices}, got {value!r}")
-        elif f.type == "bool":
+        if f.type == "bool":
             if not isinstance(value, bool):
                 raise ValueError(f"{key}: expected true or false, got {value!r}")
         elif f.type == "int":
@@ -279,6 +236,8 @@ def _rating(source: str, raw: Any, inputs: InputLayout) -> dict[str, float]:
 
 def unit_from_dict(data: dict[str, Any], source: str = "unit description") -> Unit:
     """Validate a parsed unit description and build a :class:`Unit`."""
+    if "solver" in data:
+        raise ValueError(_moved_solver(source, data["solver"]))
     head = data.get("unit")
     if not isinstance(head, dict):
         raise ValueError(f"{source} [unit]: expected a table")
@@ -300,6 +259,26 @@ def unit_from_dict(data: dict[str, Any], source: str = "unit description") -> Un
         rating=_rating(source, data["rating"], model.inputs),
         parameters=_parameters(source, data["parameters"], model.parameters),
         **sections,
+    )
+
+
+def _moved_solver(source: str, table: Any) -> str:
+    """The one-line refusal of a unit's ``[solver]`` table: where its settings go now."""
+    given = table if isinstance(table, dict) else {}
+    method = given.get("method", METHODS[0])
+    default = DEFAULT_SOLVERS.get(method, DEFAULT_SOLVERS[METHODS[0]])
+    names = [f.name for f in fields(default) if f.name != "method"]
+    changes = "".join(
+        f", {name}={given[name]!r}"
+        for name in names
+        if name in given and given[name] != getattr(default, name)
+    )
+    return (
+        f"{source} [solver]: a unit holds no solver settings any more; delete the table and "
+        f"pass the solver per run: simulate(..., solver=get_solver({default.method!r}{changes}))"
+        f" (pymc_vcc.get_solver: a method of {list(METHODS)} at its default tolerances, with "
+        f"changes to any of {names}), or --solver {default.method} on the command line; "
+        "output_interval and max_wall_time are arguments of simulate()"
     )
 
 

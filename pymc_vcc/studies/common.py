@@ -33,8 +33,7 @@ from pymc_vcc.inference.priors import Prior
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.simulator import Simulator
-from pymc_vcc.physics.solvers import METHODS
-from pymc_vcc.physics.unit import Unit, load_unit
+from pymc_vcc.physics.integration.solver import Solver, get_solver
 
 T = TypeVar("T")
 
@@ -113,8 +112,10 @@ class StudySettings:
         progress: show progress bars (default: when standard error is a terminal).
         time_limit: wall-time limit of one simulation, s (None: the simulator's own limit
             only); a local worker process that overruns it is stopped and replaced.
-        solver: ODE solver of every simulation, ``"radau"`` or ``"cvode"`` (default: the
-            unit's ``[solver] method``).
+        solver: ODE solver of every simulation: a
+            :class:`~pymc_vcc.physics.integration.solver.Solver`, or ``"radau"`` or ``"cvode"``
+            at that method's default tolerances (default: the study's own choice, Radau
+            unless the study says otherwise).
     """
 
     budget: str | Budget = "small"
@@ -126,7 +127,7 @@ class StudySettings:
     seed: int = 0
     progress: bool | None = None
     time_limit: float | None = None
-    solver: str | None = None
+    solver: str | Solver | None = None
 
     def __post_init__(self) -> None:
         get_budget(self.budget)
@@ -135,8 +136,8 @@ class StudySettings:
             raise ValueError(
                 f"time_limit must be a positive number of seconds, got {self.time_limit!r}"
             )
-        if self.solver is not None and self.solver not in METHODS:
-            raise ValueError(f"solver must be one of {list(METHODS)}, got {self.solver!r}")
+        if self.solver is not None:
+            get_solver(self.solver)
         if self.executor not in EXECUTOR_KINDS:
             raise ValueError(
                 f"executor must be one of {list(EXECUTOR_KINDS)}, got {self.executor!r}"
@@ -147,13 +148,6 @@ class StudySettings:
             check_scheduler(self.scheduler)
         if self.out is not None:
             object.__setattr__(self, "out", Path(self.out))
-
-    def unit(self, unit: Unit | None = None) -> Unit:
-        """``unit`` (default: the built-in one) with this study's solver."""
-        unit = unit or load_unit()
-        if self.solver is None or self.solver == unit.solver.method:
-            return unit
-        return unit.with_changes(solver={"method": self.solver})
 
     @property
     def work(self) -> Budget:

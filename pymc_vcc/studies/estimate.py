@@ -43,8 +43,9 @@ from pymc_vcc.inference.pymc.smc import check_kernel, check_max_steps, sample_sm
 from pymc_vcc.inference.regression import ROUNDS, check_draws, regression_abc
 from pymc_vcc.inference.samplers import SAMPLERS, SmcKernel
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
-from pymc_vcc.physics.simulate import VCCSimulator, simulate
-from pymc_vcc.physics.unit import DIFFERENCING_TOLERANCE_SCALE, Unit
+from pymc_vcc.physics.integration.solver import DIFFERENCING_TOLERANCE_SCALE, get_solver
+from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import (
     labeller,
     plot_inputs,
@@ -222,8 +223,9 @@ def draw_reference_parameters(
     )
 
 
-def _reference_run(unit: Unit, theta: dict[str, float], inputs: xr.Dataset) -> xr.Dataset:
-    result = simulate(unit, theta, inputs)
+def _reference_run(full: VCCSimulator, theta: dict[str, float]) -> xr.Dataset:
+    """The whole profile's outputs at ``theta``; ``RuntimeError`` if the run failed."""
+    result = full(theta)
     if result.attrs["status"] != "ok":
         raise RuntimeError(f"reference simulation failed: {result.attrs['failure_reason']}")
     return result
@@ -443,18 +445,18 @@ def estimation_study(
             "degenerate); pass e.g. SensorNoise.typical() or --sensor-noise typical"
         )
     started = time.perf_counter()
-    unit = settings.unit(unit)
+    unit = unit or load_unit()
     if refine:  # each round must keep enough draws to adjust every parameter and noise scale
         check_draws(
             refine // ROUNDS, len(unit.parameters) + len(unit.cycle_model.output_ids), REFINE_ACCEPT
         )
-    full = VCCSimulator(unit, inputs)
+    full = VCCSimulator(unit, inputs, solver=settings.solver)
     draw_seed, sampler_seed, predictive_seed = settings.seeds(3)
     rng = np.random.default_rng(draw_seed)
     for attempt in range(max_attempts):
         truths = draw_reference_parameters(unit, rng)
         try:
-            references = [_reference_run(unit, truth, full.inputs) for truth in truths]
+            references = [_reference_run(full, truth) for truth in truths]
             break
         except RuntimeError:
             if attempt == max_attempts - 1:
@@ -464,15 +466,18 @@ def estimation_study(
         noise_rng = np.random.default_rng(draw_seed.spawn(1)[0])
         references = [sensor_noise.measure(data, noise_rng) for data in references]
     observed = [ref.sel(time=slice(0.0, t_calibration)) for ref in references]
-    calibration_model = VCCSimulator(unit, full.inputs, t_window=(0.0, t_calibration))
+    calibration_model = VCCSimulator(
+        unit, full.inputs, t_window=(0.0, t_calibration), solver=settings.solver
+    )
     prior = UniformPrior({spec.id: (spec.low, spec.high) for spec in unit.parameters})
     noise = None if sensor_noise else dict.fromkeys(unit.cycle_model.output_ids, noise_bounds)
     with settings.open_executor() as executor:
         found = identifiability(  # what no data can narrow: the particles must not either
             VCCSimulator(
-                unit.with_tolerances(DIFFERENCING_TOLERANCE_SCALE),
+                unit,
                 full.inputs,
                 t_window=(0.0, t_calibration),
+                solver=get_solver(settings.solver).scaled(DIFFERENCING_TOLERANCE_SCALE),
             ),
             sensor_noise or SensorNoise.typical(),
             at=truths[0],
@@ -527,7 +532,7 @@ def estimation_study(
                 calibration.trees, references, predictive_seed.spawn(2), strict=True
             )
         ]
-    uncalibrated = _reference_run(unit, truths[0], full.inputs)
+    uncalibrated = _reference_run(full, truths[0])
     result = EstimationResult(
         truths=list(truths),
         calibration=calibration,

@@ -20,8 +20,9 @@ import xarray as xr
 
 from pymc_vcc.inference.identifiability import Identifiability, identifiability
 from pymc_vcc.inference.noise import SensorNoise
+from pymc_vcc.physics.integration.solver import DIFFERENCING_TOLERANCE_SCALE, get_solver
 from pymc_vcc.physics.simulate import VCCSimulator
-from pymc_vcc.physics.unit import DIFFERENCING_TOLERANCE_SCALE, Unit
+from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 
 
@@ -94,15 +95,16 @@ def identify_study(
     its stated tolerance (:class:`~pymc_vcc.physics.parameters.ParameterSpec`), else on its
     bounds."""
     started = time.perf_counter()
-    unit = settings.unit(unit)
+    unit = unit or load_unit()
     examined = list(parameters) if parameters is not None else list(unit.parameters.ids)
     if unexamined := [name for name in fit if name not in examined]:
         raise ValueError(f"fitted parameter(s) {unexamined} are not among those examined")
     simulator = VCCSimulator(
-        unit.with_tolerances(DIFFERENCING_TOLERANCE_SCALE),
+        unit,
         inputs,
         t_window=(0.0, t_end),
         parameters=parameters,
+        solver=get_solver(settings.solver).scaled(DIFFERENCING_TOLERANCE_SCALE),
     )
     point = {spec.id: spec.nominal for spec in unit.parameters} | dict(at or {})
     ranges = {spec.id: spec.known_range() for spec in unit.parameters if spec.id in examined}

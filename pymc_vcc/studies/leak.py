@@ -30,7 +30,7 @@ from pymc_vcc.inference.reference_table import ReferenceTable, simulate_table, t
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.inference.samplers import SAMPLERS, Sampler
 from pymc_vcc.physics.simulate import VCCSimulator
-from pymc_vcc.physics.unit import Unit
+from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_charge_posteriors, save_figure
 from pymc_vcc.studies.common import (
     StudySettings,
@@ -270,7 +270,7 @@ def leak_study(
         )
     if not 0 < alarm_fraction <= 1:
         raise ValueError(f"alarm_fraction must be in (0, 1], got {alarm_fraction}")
-    unit = settings.unit(unit)
+    unit = unit or load_unit()
     spec = unit.parameters[CHARGE]
     outside = [m for m in references_kg if not spec.low <= m <= spec.high]
     if not references_kg or outside:
@@ -278,7 +278,9 @@ def leak_study(
             f"references_kg must be charges within the prior bounds [{spec.low}, {spec.high}] "
             f"kg, got {list(references_kg)}"
         )
-    simulator = VCCSimulator(unit, inputs, t_window=(0.0, t_calibration), parameters=[CHARGE])
+    simulator = VCCSimulator(
+        unit, inputs, t_window=(0.0, t_calibration), parameters=[CHARGE], solver=settings.solver
+    )
     prior = UniformPrior({CHARGE: (spec.low, spec.high)})
     threshold = alarm_fraction * float(references_kg[0])
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
 from pymc_vcc.studies.unit_log import (
@@ -171,7 +172,7 @@ def real_units_benchmark(
             row = json.loads(line)
             key = (row["variant"], row["seed"], tuple(row.get("work", ())), "alarm_leaked" in row)
             done[key] = row
-    unit = settings.unit()
+    unit = load_unit()
     runs = []
     with settings.open_executor() as executor:
         for k in range(n_datasets):  # dataset-major: an interrupted run covers every variant

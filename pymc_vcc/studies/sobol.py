@@ -14,7 +14,7 @@ import xarray as xr
 
 from pymc_vcc.inference.sensitivity import sobol_indices
 from pymc_vcc.physics.simulate import VCCSimulator
-from pymc_vcc.physics.unit import Unit
+from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_sobol_heatmap, save_figure
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_netcdf
 
@@ -75,8 +75,8 @@ def sobol_study(
         (start, end) of the averaging, s (the paper's appendix: 20 s to 1060 s).
     """
     started = time.perf_counter()
-    unit = settings.unit(unit)
-    simulator = VCCSimulator(unit, inputs, t_window=(0.0, window[1]))
+    unit = unit or load_unit()
+    simulator = VCCSimulator(unit, inputs, t_window=(0.0, window[1]), solver=settings.solver)
     bounds = {spec.id: (spec.low, spec.high) for spec in unit.parameters}
     with settings.open_executor() as executor:
         indices = sobol_indices(

@@ -33,6 +33,7 @@ import xarray as xr
 from pymc_vcc.inference.error_model import SensorAccuracy, lagged
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.physics.inputs import builtin_inputs, window
+from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 
@@ -114,7 +115,7 @@ def generate_truth(
     t_end: float = 1060.0,
     parameters: Mapping[str, float] | None = None,
     n_volumes: int | None = None,
-    solver: str = "cvode",
+    solver: str | Solver = "cvode",
 ) -> Truth:
     """Draw a true unit of ``variant`` and the record its logger would write.
 

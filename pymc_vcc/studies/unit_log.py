@@ -45,7 +45,8 @@ from pymc_vcc.inference.priors import Prior, UniformPrior
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.physics.inputs import input_segments
-from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.integration.solver import Solver
+from pymc_vcc.physics.simulate import OUTPUT_INTERVAL, VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 
 CHARGE = "M0"
@@ -398,7 +399,7 @@ def calibrate_record(
     draws: int = RECORD_BUDGETS["small"][0],
     error_draws: int = ERROR_DRAWS,
     seed: int = 0,
-    solver: str = "cvode",
+    solver: str | Solver = "cvode",
     progressbar: bool = False,
     rounds: int = 1,
 ) -> xr.DataTree:
@@ -416,7 +417,8 @@ def calibrate_record(
         draws: SMC particles.
         error_draws: draws of the model-error statistics.
         seed: seeds every random draw.
-        solver: ODE solver.
+        solver: ODE solver, a method name or a
+            :class:`~pymc_vcc.physics.integration.solver.Solver`.
         rounds: calibrations in turn, each after the first with the model error drawn at the
             previous posterior's draws (local rather than over the whole prior); the rounds
             before the last scout with :data:`SCOUTING_SHARE` of the particles and draws.
@@ -691,8 +693,8 @@ def record_study(
     budget = settings.budget if isinstance(settings.budget, str) else "small"
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: a record's calibration takes {list(RECORD_BUDGETS)}")
-    unit = settings.unit(unit)
-    measured = load_log(log, column_map, dt=unit.solver.output_interval)
+    unit = unit or load_unit()
+    measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
     prior, commissioned = None, None
     if commissioning is not None:
         path = Path(commissioning)

@@ -40,7 +40,7 @@ from pymc_vcc.inference.distances import (
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.physics.simulate import VCCSimulator
-from pymc_vcc.physics.unit import Unit
+from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.leak import (
     CHARGE,
@@ -142,14 +142,16 @@ def validation_study(
     if int(n_datasets) != n_datasets or n_datasets < 1:
         raise ValueError(f"n_datasets must be a positive integer, got {n_datasets}")
     sensor_noise = sensor_noise or SensorNoise.typical()
-    unit = settings.unit(unit)
+    unit = unit or load_unit()
     spec = unit.parameters[CHARGE]
     if not spec.low <= reference_kg <= spec.high:
         raise ValueError(
             f"reference_kg must lie in the prior bounds [{spec.low}, {spec.high}] kg, got "
             f"{reference_kg}"
         )
-    simulator = VCCSimulator(unit, inputs, t_window=(0.0, t_calibration), parameters=[CHARGE])
+    simulator = VCCSimulator(
+        unit, inputs, t_window=(0.0, t_calibration), parameters=[CHARGE], solver=settings.solver
+    )
     prior = UniformPrior({CHARGE: (spec.low, spec.high)})
     runs = []
     log = None

@@ -37,9 +37,6 @@ from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
 N_PROPERTIES = 5
 """Rows of a cell-property array: T (K), ρ (kg/m³), ∂ρ/∂p, ∂ρ/∂h, quality."""
 
-INTEGRAL_ATOL = 1e-4
-"""Absolute tolerance of a controller integral, kg s."""
-
 
 class BlockKind(StrEnum):
     """What a block of the state holds; sets its tolerance and its role in a zone."""
@@ -84,7 +81,8 @@ class ControllerSettings:
 
 
 class Tolerances(Protocol):
-    """Absolute tolerances of the state by block kind (a unit's solver settings)."""
+    """Absolute tolerances of the state by block kind (a solver's,
+    :class:`pymc_vcc.physics.integration.solver.Solver`)."""
 
     @property
     def atol_pressure(self) -> float: ...  # Pa
@@ -94,6 +92,9 @@ class Tolerances(Protocol):
 
     @property
     def atol_temperature(self) -> float: ...  # K
+
+    @property
+    def atol_integral(self) -> float: ...  # kg s
 
 
 class UnitDescription(Protocol):
@@ -285,12 +286,12 @@ class StateLayout:
         return tuple(BLOCK_UNITS[block.kind] for block in self.blocks for _ in range(block.size))
 
     def tolerances(self, solver: Tolerances) -> np.ndarray:
-        """Absolute tolerances of the state, by block kind, from the unit's solver settings."""
+        """Absolute tolerances of the state, by block kind, from the solver's."""
         by_kind = {
             BlockKind.PRESSURE: solver.atol_pressure,
             BlockKind.ENTHALPY: solver.atol_enthalpy,
             BlockKind.TEMPERATURE: solver.atol_temperature,
-            BlockKind.INTEGRAL: INTEGRAL_ATOL,
+            BlockKind.INTEGRAL: solver.atol_integral,
         }
         atol = np.empty(self.size)
         for block in self.blocks:
@@ -319,7 +320,7 @@ class CycleModel(ABC):
     description: ClassVar[str]
     hardware: ClassVar[type]
     """A frozen dataclass with one field per section of the unit file that this cycle adds to
-    the common ones (``[discretisation]``, ``[solver]``, ``[controller]``, ``[rating]``), each a
+    the common ones (``[discretisation]``, ``[controller]``, ``[rating]``), each a
     frozen dataclass of numbers (SI; a field declared with :data:`FRACTION` must lie in
     (0, 1)). The unit loader reads and checks them; :meth:`constants` reads them."""
     parameters: ClassVar[ParameterIds]

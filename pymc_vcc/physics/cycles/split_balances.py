@@ -291,14 +291,10 @@ def flows(y, u, c, tables, props, sums):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
-    """The walls' and zones' rates into ``dydt`` given the cell properties ``props`` and the
-    :class:`Flows` ``flow``; returns (Q_cond, Q_evap, sensible and latent heat of the indoor
-    coil), W. Each zone's rates read its own cells and walls and ``flow`` alone.
-
-    ``memo`` (2 N rows of :data:`MEMO_COLUMNS`: condenser cells, then evaporator cells) holds
-    coil cell heats with their arguments: a cell whose arguments match its row reuses the heat
-    (a Jacobian column changes few cells); with ``remember`` the rows take this call's."""
+def coil_rates(y, u, c, tables, props, flow, dydt, memo, remember):
+    """The coils' wall rates into ``dydt``, each coil under its own fan's air; returns the heat
+    each zone cell takes from its wall (high side, low side; W) and (Q_cond, Q_evap, sensible
+    and latent heat of the indoor coil), W. ``memo`` and ``remember`` as for :func:`rates`."""
     at = c.layout
     n = at.h_liquid_line - at.h_cond
     heating = hot_gas_line(at)
@@ -311,15 +307,12 @@ def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
     ne = at.zones[1, 1]
     h_zc = y[at.p_cond + 1 : at.p_cond + 1 + nc]
     h_ze = y[at.p_evap + 1 : at.p_evap + 1 + ne]
-    volumes = cell_volumes(c)
     T_c = props[0, :nc]
     x_c = props[4, :nc]
     T_e = props[0, nc:]
     x_e = props[4, nc:]
-    m_comp, m_src, m_valve, h_d = flow.m_comp, flow.m_src, flow.m_valve, flow.h_d
+    m_comp, m_valve, h_d = flow.m_comp, flow.m_valve, flow.h_d
     point_e = flow.sat_e
-
-    # ---- walls and air: each coil under its own fan's air
     T_air_c = air_inlet_temperature(
         T_ind if heating else T_amb, cond.fan_power, n * cond.air_capacity
     )
@@ -388,8 +381,20 @@ def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
         dydt[at.Tw_evap + i] = (q_air - q_ref) / evap.wall_capacity
         src_e[i] = q_ref
         q_evap += q_ref
+    return src_c, src_e, q_cond, q_evap, q_sensible, q_latent
 
-    # ---- refrigerant zones
+
+@njit(cache=True, error_model="numpy", inline="always")
+def zone_rates(y, c, props, flow, src_c, src_e, dydt):
+    """The refrigerant zones' rates (pressure, enthalpies) and the controller integral's into
+    ``dydt``, given the heat each cell takes from its wall (``src_c``, ``src_e``, W)."""
+    at = c.layout
+    nc = at.zones[0, 1]  # high-side cells
+    ne = at.zones[1, 1]
+    h_zc = y[at.p_cond + 1 : at.p_cond + 1 + nc]
+    h_ze = y[at.p_evap + 1 : at.p_evap + 1 + ne]
+    volumes = cell_volumes(c)
+    m_comp, m_src, m_valve, h_d = flow.m_comp, flow.m_src, flow.m_valve, flow.h_d
     src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
     src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[nc - 1] - h_ze[0])
     src_e[ne - 1] -= m_comp * (flow.h_suc - h_ze[ne - 1])
@@ -418,30 +423,35 @@ def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
         dydt[at.p_evap + 1 : at.p_evap + 1 + ne],
     )
     dydt[at.z] = c.controller.m0 - flow.mass
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
+    """The walls' and zones' rates into ``dydt`` given the cell properties ``props`` and the
+    :class:`Flows` ``flow``; returns (Q_cond, Q_evap, sensible and latent heat of the indoor
+    coil), W. Each zone's rates read its own cells and walls and ``flow`` alone.
+
+    ``memo`` (2 N rows of :data:`MEMO_COLUMNS`: condenser cells, then evaporator cells) holds
+    coil cell heats with their arguments: a cell whose arguments match its row reuses the heat
+    (a Jacobian column changes few cells); with ``remember`` the rows take this call's."""
+    src_c, src_e, q_cond, q_evap, q_sensible, q_latent = coil_rates(
+        y, u, c, tables, props, flow, dydt, memo, remember
+    )
+    zone_rates(y, c, props, flow, src_c, src_e, dydt)
     return q_cond, q_evap, q_sensible, q_latent
 
 
-@njit(cache=True, error_model="numpy")
-def balances(y, u, c, tables, props, dydt, out, rates_too=True):
-    """:func:`evaluate` given the cell properties ``props`` of every cell; with ``rates_too``
-    False the outputs alone (walls and zones skipped: ``dydt`` untouched, the heats NaN)."""
+@njit(cache=True, error_model="numpy", inline="always")
+def write_outputs(y, c, props, flow, q_cond, q_evap, q_sensible, q_latent, out):
+    """The outputs and the diagnostics into ``out`` at their offsets (:data:`OUT`), from the
+    state, the cell properties, the :class:`Flows` and the heats."""
     at = c.layout
     n = at.h_liquid_line - at.h_cond
     heating = hot_gas_line(at)
     first = 1 if heating else 0  # the condenser's first cell in the high-side zone
-    flow = flows(y, u, c, tables, props, cell_sums(c, props))
-    if not flow.finite:
-        out[:] = np.nan
-        dydt[:] = np.nan
-        return False
-    q_cond = q_evap = q_latent = q_sensible = np.nan
-    if rates_too:
-        q_cond, q_evap, q_sensible, q_latent = rates(y, u, c, tables, props, flow, dydt)
     cond, evap = c.condenser, c.evaporator
     outdoor, indoor = (evap, cond) if heating else (cond, evap)
     nc = at.zones[0, 1]
-
-    # ---- outputs and diagnostics (OUTPUTS)
     out[OUT.TD] = flow.T_d
     out[OUT.PD] = flow.p_d
     out[OUT.TS] = flow.T_s
@@ -469,6 +479,21 @@ def balances(y, u, c, tables, props, dydt, out, rates_too=True):
     out[OUT.dp_vap] = flow.dp_vap
     out[OUT.Q_latent] = 0.0 if heating else q_latent  # the indoor coil condenses: no latent load
     out[OUT.SHR] = 1.0 if heating else q_sensible / (q_sensible + q_latent)
+
+
+@njit(cache=True, error_model="numpy")
+def balances(y, u, c, tables, props, dydt, out, rates_too=True):
+    """:func:`evaluate` given the cell properties ``props`` of every cell; with ``rates_too``
+    False the outputs alone (walls and zones skipped: ``dydt`` untouched, the heats NaN)."""
+    flow = flows(y, u, c, tables, props, cell_sums(c, props))
+    if not flow.finite:
+        out[:] = np.nan
+        dydt[:] = np.nan
+        return False
+    q_cond = q_evap = q_latent = q_sensible = np.nan
+    if rates_too:
+        q_cond, q_evap, q_sensible, q_latent = rates(y, u, c, tables, props, flow, dydt)
+    write_outputs(y, c, props, flow, q_cond, q_evap, q_sensible, q_latent, out)
     return not rates_too or bool(np.isfinite(dydt).all())
 
 

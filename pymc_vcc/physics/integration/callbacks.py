@@ -23,11 +23,9 @@ from numba.core.caching import FunctionCache
 from numba.core.ccallback import CFunc
 
 from pymc_vcc.physics import source_digest
-from pymc_vcc.physics.binding import bind
 from pymc_vcc.physics.cycles.base import CycleModel
-from pymc_vcc.physics.records import make_record, record_array
-from pymc_vcc.physics.refrigerant.tables import PropertyTables
-from pymc_vcc.physics.sundials import (
+from pymc_vcc.physics.integration.binding import bind
+from pymc_vcc.physics.integration.sundials import (
     JAC_SIGNATURE,
     RHS_SIGNATURE,
     Callbacks,
@@ -35,6 +33,8 @@ from pymc_vcc.physics.sundials import (
     dense_matrix_data,
     vector_data,
 )
+from pymc_vcc.physics.records import make_record, record_array
+from pymc_vcc.physics.refrigerant.tables import PropertyTables
 
 
 def _table_record(tables: PropertyTables) -> np.void:
@@ -199,7 +199,7 @@ def c_callbacks(evaluate: Any, jacobian: Any, data_dtype: np.dtype, c_dtype: np.
 class BoundCycle:
     """A cycle's kernels bound to one simulation (constants ``c``, ``tables``) and to the
     inputs of the current segment, :attr:`u` (overwrite it between segments): the
-    :class:`~pymc_vcc.physics.solvers.SegmentModel` both solvers integrate."""
+    :class:`~pymc_vcc.physics.integration.segments.SegmentModel` both solvers integrate."""
 
     def __init__(self, model: CycleModel, y: np.ndarray, u: np.ndarray, c: np.ndarray, tables):
         self.model, self.c, self.tables, self.n_states = model, c, tables, y.size

@@ -26,11 +26,12 @@ import numpy as np
 import xarray as xr
 from numba.core.dispatcher import Dispatcher
 
+from pymc_vcc import physics
 from pymc_vcc.physics import source_digest
-from pymc_vcc.physics.callbacks import BoundCycle
 from pymc_vcc.physics.cycles import CycleModel
 from pymc_vcc.physics.inputs import constant_inputs, input_segments
-from pymc_vcc.physics.sundials import compile_output_loop
+from pymc_vcc.physics.integration.callbacks import BoundCycle
+from pymc_vcc.physics.integration.sundials import compile_output_loop
 from pymc_vcc.physics.unit import Unit
 
 ANNOUNCE_AFTER_SECONDS = 2.0
@@ -40,7 +41,7 @@ TYPICAL_COMPILE_SECONDS = 40
 """CPU time of a cold compile of the cycle model, s (37 s measured; the wall time grows with
 the machine's load: 62 to 500 s on a shared 2-core machine)."""
 
-PHYSICS_PACKAGE = __name__.rpartition(".")[0]
+PHYSICS_PACKAGE = physics.__name__
 """Every cached Numba kernel of the package is defined in the modules of this package."""
 
 STAMP_NAME = "pymc_vcc-physics-sources.digest"

@@ -205,7 +205,7 @@ _ADVANCE_TYPES = (
 
 def compile_output_loop() -> None:
     """Compile (or load from the cache) the output loop for the types the driver passes, so that
-    no simulation's wall clock counts it (see :mod:`pymc_vcc.physics.warmup`)."""
+    no simulation's wall clock counts it (see :mod:`pymc_vcc.physics.integration.warmup`)."""
     _advance.compile(_ADVANCE_TYPES)
 
 

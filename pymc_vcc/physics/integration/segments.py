@@ -11,13 +11,10 @@ C callbacks.
 * ``radau``: scipy's 5th-order implicit Runge-Kutta, stepped from Python; the reference.
 * ``cvode``: SUNDIALS CVODE (BDF of orders 1 to :data:`CVODE_MAX_ORDER`, dense direct linear
   solver, Jacobian reused across steps) from scikit-sundae's libraries, calling the model's
-  Numba kernels as C callbacks (:mod:`pymc_vcc.physics.sundials`): its step loop, the model
-  and the output interpolation all run in machine code.
+  Numba kernels as C callbacks (:mod:`.sundials`): its step loop, the model and the output
+  interpolation all run in machine code.
 
-At equal tolerances BDF's error control lets more global error through than Radau's, so CVODE
-runs at :data:`CVODE_RTOL_SCALE` times the unit's rtol and :data:`CVODE_ATOL_SCALE` times its
-atols. The relative tolerance sets how close the outputs come, the absolute ones (pressures,
-enthalpies) how well the total mass holds (README: "Two solvers").
+The solver and its tolerances are a :class:`~pymc_vcc.physics.integration.solver.Solver`.
 """
 
 from __future__ import annotations
@@ -30,31 +27,16 @@ import numpy as np
 from scipy.integrate import Radau
 from scipy.linalg import get_lapack_funcs
 
-from pymc_vcc.physics import sundials
 from pymc_vcc.physics.failures import Failure, FailureKind
-
-METHODS: tuple[str, ...] = ("radau", "cvode")
-"""Solver names accepted by ``[solver] method`` in a unit file, ``simulate(solver=...)`` and
-``--solver`` on the command line."""
-
-CVODE_RTOL_SCALE = 0.1
-"""CVODE's rtol as a fraction of the unit's. Over nominal and 40 box draws (1060 s, against CVODE
-at a thousandth of the unit's tolerances) the largest error is 1.2e-3 of an output's range at
-the median and 3.3e-3 at the 90th percentile, against Radau's 2.0e-3 and 6.6e-3; at 0.2 × it
-is Radau's (2.1e-3, 6.8e-3)."""
-
-CVODE_ATOL_SCALE = 0.01
-"""CVODE's atols as a fraction of the unit's. Over 200 box draws (seed 2026, 1060 s) the total
-mass stays within 7.8e-5 of M0 (median 1.7e-5), as with both scales at 0.03 × (7.8e-5, median
-9.3e-6), which took 14 % more right-hand sides; with the atols at 0.03 × and the rtol at 0.1 ×
-it drifted up to 1.6e-4 over 100 of them, with both at 0.1 × up to 3.7e-4."""
+from pymc_vcc.physics.integration import sundials
+from pymc_vcc.physics.integration.solver import Solver
 
 CVODE_MAX_ORDER = 3
 """Highest BDF order. With orders 4 and 5 (CVODE's default) the onset of a fast transient that
 starts by itself (box draw 33 of ``tests/test_solvers.py``: MDOT falls 25 % within 2 s) came
 1 s late, with order 3 within 0.01 s; and order 3 took 7 % fewer right-hand sides (median;
 -14 % to +3 %). Measured on 31 Table III box draws (1060 s) against an rtol 1e-8 reference:
-largest error 59 % (order 5) against 0.9 % (order 3) of an output's range; Radau at the unit's
+largest error 59 % (order 5) against 0.9 % (order 3) of an output's range; Radau at its default
 tolerances 11 %."""
 
 
@@ -121,24 +103,13 @@ class SegmentSolver(Protocol):
         ...
 
 
-def check_method(method: str) -> str:
-    """``method`` if it names a solver that can run here: ``ValueError`` naming the choices
-    otherwise, ``ImportError`` if CVODE's libraries do not fit (see :mod:`.sundials`)."""
-    if method not in METHODS:
-        raise ValueError(f"solver must be one of {list(METHODS)}, got {method!r}")
-    if method == "cvode":
-        sundials.library()
-    return method
-
-
-def make_solver(
-    method: str, rtol: float, atol: np.ndarray, max_step: float, wall_limit: float
-) -> SegmentSolver:
-    """A fresh solver called ``method`` (one of :data:`METHODS`) with these tolerances, the
-    largest step (s) and the wall-clock limit (s, only named in failure reasons)."""
-    if check_method(method) == "radau":
-        return RadauSolver(rtol, atol, max_step, wall_limit)
-    return CvodeSolver(rtol, atol, max_step, wall_limit)
+def make_solver(solver: Solver, atol: np.ndarray, wall_limit: float) -> SegmentSolver:
+    """A fresh segment solver running ``solver``, with the absolute tolerance of each state
+    (``atol``, from the solver's by the state's kind) and the wall-clock limit (s, only named in
+    failure reasons)."""
+    if solver.method == "radau":
+        return RadauSolver(solver.rtol, atol, solver.max_step, wall_limit)
+    return CvodeSolver(solver.rtol, atol, solver.max_step, wall_limit)
 
 
 class _WallClockLimit(Exception):
@@ -248,13 +219,13 @@ def _use_direct_lapack(solver: Radau) -> None:
 
 class CvodeSolver:
     """SUNDIALS CVODE (BDF, orders 1 to :data:`CVODE_MAX_ORDER`, dense LU) called directly, with
-    the model's C callbacks (:mod:`pymc_vcc.physics.sundials`).
+    the model's C callbacks (:mod:`pymc_vcc.physics.integration.sundials`).
 
     One CVODE instance serves every segment of a model (re-initialised at each segment's start,
     which stops it at the segment's end); the outputs come from CVODE's own interpolation in normal
     mode, so it never stops at them; a compiled loop calls CVODE for the output times (see
-    :meth:`~pymc_vcc.physics.sundials.Cvode.advance_through`), and the wall clock is read
-    between its chunks of output times; the states are checked finite once per segment.
+    :meth:`.sundials.Cvode.advance_through`), and the wall clock is read between its chunks of
+    output times; the states are checked finite once per segment.
     """
 
     calls_blas = False  # SUNDIALS' own dense LU
@@ -269,7 +240,7 @@ class CvodeSolver:
     def __init__(self, rtol: float, atol: np.ndarray, max_step: float, wall_limit: float):
         self.counters = Counters()
         self.wall_limit = wall_limit
-        self._settings = (rtol * CVODE_RTOL_SCALE, atol * CVODE_ATOL_SCALE, max_step)
+        self._settings = (rtol, atol, max_step)
         self._cvode: sundials.Cvode | None = None
         self._model: SegmentModel | None = None
 
