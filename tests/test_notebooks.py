@@ -21,6 +21,7 @@ def test_the_tutorials_are_there_and_committed_without_outputs():
 
 
 @pytest.mark.slow
+@pytest.mark.notebook
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[path.stem for path in NOTEBOOKS])
 def test_notebook_runs_at_the_smoke_budget(path, monkeypatch, tmp_path):
     monkeypatch.setenv("PYMC_VCC_BUDGET", "smoke")

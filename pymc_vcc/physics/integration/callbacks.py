@@ -72,7 +72,8 @@ def _array4_at(address, shape):
 @njit(cache=True)
 def tables_at(r):
     """The :class:`PropertyTables` whose addresses record ``r`` (:func:`_table_record`)
-    holds, no copy; its fields in the NamedTuple's order (``tests/test_callbacks.py`` checks)."""
+    holds, no copy; its fields in the NamedTuple's order
+    (``tests/physics/test_callbacks.py`` checks)."""
     return PropertyTables(
         r.p_min,
         r.p_max,

@@ -33,7 +33,7 @@ from pymc_vcc.physics.integration.solver import Solver
 
 CVODE_MAX_ORDER = 3
 """Highest BDF order. With orders 4 and 5 (CVODE's default) the onset of a fast transient that
-starts by itself (box draw 33 of ``tests/test_solvers.py``: MDOT falls 25 % within 2 s) came
+starts by itself (box draw 33 of ``tests/physics/test_solvers.py``: MDOT falls 25 % within 2 s) came
 1 s late, with order 3 within 0.01 s; and order 3 took 7 % fewer right-hand sides (median;
 -14 % to +3 %). Measured on 31 Table III box draws (1060 s) against an rtol 1e-8 reference:
 largest error 59 % (order 5) against 0.9 % (order 3) of an output's range; Radau at its default

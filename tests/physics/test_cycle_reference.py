@@ -1,9 +1,9 @@
 """Regression: the built-in cooling unit gives the stored reference outputs.
 
-The reference (``tests/data/cycle_reference.npz``) holds the nine outputs and the diagnostics on
-the Fig. 4 profile at nominal parameters and at 20 fixed Table III box draws, written by
-``tests/data/make_cycle_reference.py``; a deliberate physics change regenerates the file with
-that script.
+The reference (``tests/physics/data/cycle_reference.npz``) holds the nine outputs and the
+diagnostics on the Fig. 4 profile at nominal parameters and at 20 fixed Table III box draws,
+written by ``tests/physics/data/make_cycle_reference.py``; a deliberate physics change
+regenerates the file with that script.
 
 Compiled code and linear algebra differ between CPUs (Numba compiles for the host, OpenBLAS
 picks its kernels by CPU), so a run is reproducible bit for bit on one machine only. Across

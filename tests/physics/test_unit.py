@@ -112,7 +112,7 @@ def test_the_worked_example_of_models_readme_loads_and_runs():
 
     from pymc_vcc.physics.simulate import operating_point
 
-    unit = load_unit(Path(__file__).parents[1] / "models" / "r32_heat_pump_3kw.toml")
+    unit = load_unit(Path(__file__).parents[2] / "models" / "r32_heat_pump_3kw.toml")
     assert (unit.cycle, unit.refrigerant, unit.hardware.condenser.n_paths) == (
         "heat-pump-heating",
         "R32",

@@ -2,10 +2,10 @@
 
 The nine outputs and the diagnostics on the built-in Fig. 4 step profile (2120 s, every 10 s)
 at nominal parameters and at 20 fixed uniform draws from the Table III box. The test
-``tests/test_cycle_reference.py`` compares the simulator against it. Regenerate only when the
-physics changes on purpose:
+``tests/physics/test_cycle_reference.py`` compares the simulator against it. Regenerate only
+when the physics changes on purpose:
 
-    .venv/bin/python tests/data/make_cycle_reference.py
+    .venv/bin/python tests/physics/data/make_cycle_reference.py
 """
 
 from __future__ import annotations
