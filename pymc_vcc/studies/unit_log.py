@@ -134,22 +134,7 @@ def coil_offset(
     margin = 0.1 * (high - low)
     grid = np.arange(low - margin, high + margin + COIL_OFFSET_STEP / 2, COIL_OFFSET_STEP)
     charges = np.linspace(low, high, COIL_OFFSET_CHARGES + 2)[1:-1]
-    fine = VCCSimulator(
-        fine_unit,
-        model.inputs,
-        outputs=model.output_names,
-        t_window=model.t_window,
-        solver=model.solver,
-        settle=model.settle,
-    )
-    nominal = VCCSimulator(
-        model.unit,
-        model.inputs,
-        outputs=model.output_names,
-        t_window=model.t_window,
-        solver=model.solver,
-        settle=model.settle,
-    )
+    fine, nominal = _unit_runs(model, fine_unit), _unit_runs(model, model.unit)
     tasks = [(fine, float(c)) for c in charges] + [(nominal, float(c)) for c in grid]
     runs = executor.map(_run_at_charge, tasks)
     summaries = [
@@ -180,6 +165,19 @@ def coil_offset(
     return CoilOffset(np.array(measured), np.array(offsets)), len(tasks)
 
 
+def _unit_runs(model: VCCSimulator, unit: Unit, inputs: xr.Dataset | None = None) -> VCCSimulator:
+    """``model``'s runs (outputs, window, solver, settling) of ``unit``, every parameter
+    settable, on ``inputs`` (default: the model's)."""
+    return VCCSimulator(
+        unit,
+        model.inputs if inputs is None else inputs,
+        outputs=model.output_names,
+        t_window=model.t_window,
+        solver=model.solver,
+        settle=model.settle,
+    )
+
+
 def _run_at_charge(task: tuple[VCCSimulator, float]) -> xr.Dataset:
     simulator, charge = task
     return simulator({CHARGE: charge})
@@ -203,17 +201,7 @@ class ErrorPair:
 
     def __call__(self, draw: dict) -> tuple[np.ndarray, np.ndarray] | None:
         logged = self.accuracy.shift_inputs(self.model.inputs, draw["input_errors"])
-        units = [
-            VCCSimulator(
-                unit,
-                logged,
-                outputs=self.model.output_names,
-                t_window=self.model.t_window,
-                solver=self.model.solver,
-                settle=self.model.settle,
-            )
-            for unit in (self.fine_unit, self.model.unit)
-        ]
+        units = [_unit_runs(self.model, unit, logged) for unit in (self.fine_unit, self.model.unit)]
         true_parameters = {**draw["fixed"], **draw["theta"]}
         fine_parameters = dict(true_parameters)
         if self.offset is not None:
