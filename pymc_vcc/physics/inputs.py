@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike
 
 from pymc_vcc.physics.cycles import INPUTS
 from pymc_vcc.physics.cycles.base import InputLayout
+from pymc_vcc.physics.quantities import QUANTITY_OF_UNIT, unit_converter
 
 BUILTIN_PROFILE = "fig4_steps.csv"
 """File name of the built-in 2120 s step profile inside ``pymc_vcc/data``."""
@@ -142,8 +143,8 @@ def _split_header_unit(column: str) -> tuple[str, str | None]:
 
 
 def _converter(unit: str, input_id: str, source: str) -> Callable[[np.ndarray], np.ndarray]:
-    """Values in ``unit`` to the SI unit of ``input_id``: SI and °C directly, anything else
-    (``%``, ``rpm``, ``degF``, ...) with pint, as the measured-log reader converts."""
+    """Values in ``unit`` to the SI unit of ``input_id``: SI, °C and % directly, anything else
+    (``rpm``, ``degF``, ...) with pint, as the measured-log reader converts."""
     spec = INPUTS[input_id]
     if unit == spec.unit:
         return lambda values: values
@@ -151,8 +152,6 @@ def _converter(unit: str, input_id: str, source: str) -> Callable[[np.ndarray], 
         return lambda values: values + _CELSIUS_OFFSET
     if spec.unit == "1" and unit == "%":
         return lambda values: values / 100.0
-    from pymc_vcc.io.measurements import QUANTITY_OF_UNIT, unit_converter  # pint: other units
-
     try:
         return unit_converter(unit, QUANTITY_OF_UNIT[spec.unit])
     except ValueError as error:
