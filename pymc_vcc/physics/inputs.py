@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike
 
 from pymc_vcc.physics.cycles import INPUTS
 from pymc_vcc.physics.cycles.base import InputLayout
-from pymc_vcc.physics.quantities import QUANTITY_OF_UNIT, unit_converter
+from pymc_vcc.physics.quantities import QUANTITY_OF_UNIT, time_unit_seconds, unit_converter
 
 BUILTIN_PROFILE = "fig4_steps.csv"
 """File name of the built-in 2120 s step profile inside ``pymc_vcc/data``."""
@@ -125,7 +125,6 @@ def validate_inputs(inputs: xr.Dataset, layout: InputLayout = INPUTS) -> None:
 
 
 _CELSIUS = ("degC", "°C", "C", "℃", "celsius")
-_SECONDS_PER = {"s": 1.0, "sec": 1.0, "second": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
 _MISSING = ("", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "none", "None", "-")
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
 
@@ -189,7 +188,8 @@ def load_inputs_csv(
         column but the time must be named by an input id.
     time_column
         The column of the times: numbers from 0, strictly increasing, in ``time_unit`` (or
-        the unit its header or the units row gives: ``s``, ``ms``, ``min``, ``h``).
+        the unit its header or the units row gives: any unit of time, ``s``, ``ms``, ``min``,
+        ``h``, ...).
     time_unit
         Unit of the times when the file does not give one.
     decimal
@@ -334,12 +334,10 @@ def _inputs_from_csv_text(
                 ) from None
         return values
 
-    seconds = _SECONDS_PER.get(unit_of(time_index) or time_unit)
-    if seconds is None:
-        raise ValueError(
-            f"{source}: time unit {unit_of(time_index) or time_unit!r}; allowed are "
-            f"{list(_SECONDS_PER)}"
-        )
+    try:
+        seconds = time_unit_seconds(unit_of(time_index) or time_unit)
+    except ValueError as error:
+        raise ValueError(f"{source}: {error}") from None
     values = {}
     for input_id, index in selected.items():
         convert = _converter(unit_of(index) or INPUTS[input_id].unit, input_id, source)
