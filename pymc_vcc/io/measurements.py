@@ -50,6 +50,7 @@ import xarray as xr
 
 from pymc_vcc.io.plausibility import check_plausible
 from pymc_vcc.physics.components.moist_air import ATMOSPHERIC_PRESSURE
+from pymc_vcc.physics.csv_cells import DECIMAL_COMMA, MISSING_CELLS, is_number, split_header_unit
 from pymc_vcc.physics.cycles import INPUTS, MEASURABLE_OUTPUT_INFO
 from pymc_vcc.physics.inputs import INPUT_IDS, make_inputs
 from pymc_vcc.physics.quantities import (
@@ -67,8 +68,6 @@ STEPPED_INPUTS: tuple[str, ...] = tuple(spec.id for spec in INPUTS if spec.stepp
 resampled by nearest sample, and held without averaging across a step (each step starts a new
 hold block)."""
 
-_MISSING = ("", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "none", "None", "-")
-_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
 _DOTTED_DATE = re.compile(r"^\s*\d{1,2}\.\d{1,2}\.\d{2,4}")
 
 
@@ -221,19 +220,13 @@ def _read_table(path: Path) -> tuple[_Table, str]:
     return _Table(header, cells, {}, 2), delimiter
 
 
-def _is_number(text: str, decimal: str) -> bool:
-    try:
-        float(text.replace(decimal, ".") if decimal != "." else text)
-    except ValueError:
-        return False
-    return True
-
-
 def _split_units_row(table: _Table, value_columns: list[str], decimal: str) -> _Table:
     """Take a row of units right under the header out of the data, if there is one: every
     value column's first cell is text that is not a number (e.g. ``degC``, ``bar``)."""
     first = [table.column(name).iloc[0] for name in value_columns]
-    if not all(cell and cell not in _MISSING and not _is_number(cell, decimal) for cell in first):
+    if not all(
+        cell and cell not in MISSING_CELLS and not is_number(cell, decimal) for cell in first
+    ):
         return table
     units_row = {name: table.column(name).iloc[0] for name in table.header}
     cells = table.cells.iloc[1:].reset_index(drop=True)
@@ -247,13 +240,13 @@ def _infer_decimal(table: _Table, value_columns: list[str], delimiter: str) -> s
     if delimiter == ",":
         return "."
     sample = pd.concat([table.column(name).head(50) for name in value_columns])
-    return "," if sample.str.match(_DECIMAL_COMMA).any() else "."
+    return "," if sample.str.match(DECIMAL_COMMA).any() else "."
 
 
 def _column_values(path: Path, table: _Table, name: str, decimal: str) -> np.ndarray:
     """The numbers of file column ``name`` (NaN where empty); a non-number is an error."""
     text = table.column(name)
-    missing = text.isin(_MISSING)
+    missing = text.isin(MISSING_CELLS)
     normalised = text.str.replace(decimal, ".", regex=False) if decimal != "." else text
     values = pd.to_numeric(normalised.where(~missing), errors="coerce")
     bad = np.flatnonzero(values.isna() & ~missing)
@@ -278,7 +271,7 @@ def _parse_times(
     (``time_format`` if given, else ISO 8601 or the format pandas infers; day first when the
     date is written with dots). Zone-less date-times are taken as UTC."""
     cells = table.column(name)
-    if _is_number(cells.iloc[0], decimal):
+    if is_number(cells.iloc[0], decimal):
         scale = time_unit_seconds(time_unit)
         seconds = _column_values(path, table, name, decimal) * scale
     else:
@@ -395,22 +388,6 @@ def _held_inputs(resampled: dict[str, np.ndarray], dt: float, hold: float) -> xr
     return make_inputs(time, **values)
 
 
-def _split_header_unit(column: str) -> tuple[str, str | None]:
-    """``"TD [degC]"`` or ``"TD (F)"`` -> (``"TD"``, unit); a bare name -> (name, None)."""
-    closing = {"]": "[", ")": "("}.get(column[-1:]) if column else None
-    if closing is None:
-        return column, None
-    depth = 0
-    for position in range(len(column) - 1, -1, -1):
-        char = column[position]
-        depth += char == column[-1]
-        depth -= char == closing
-        if depth == 0:
-            name, unit = column[:position].strip(), column[position + 1 : -1].strip()
-            return (name, unit) if name and unit else (column, None)
-    return column, None
-
-
 def load_measurements(
     path: str | Path,
     columns: Mapping[str, str],
@@ -492,7 +469,7 @@ def load_measurements(
         raise ValueError(f"columns must map at least one output of {list(MEASURABLE_OUTPUT_INFO)}")
 
     table, delimiter = _read_table(path)
-    bare = {_split_header_unit(name)[0]: name for name in table.header}
+    bare = {split_header_unit(name)[0]: name for name in table.header}
 
     def find(column: str) -> str:
         if column in table.header:
@@ -522,7 +499,7 @@ def load_measurements(
         unit = (
             given_units.get(column)
             or given_units.get(file_column)
-            or _split_header_unit(file_column)[1]
+            or split_header_unit(file_column)[1]
             or table.units_row.get(file_column)
         )
         quantity = QUANTITY_OF_UNIT[
