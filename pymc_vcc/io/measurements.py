@@ -39,134 +39,36 @@ import itertools
 import math
 import re
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import cache
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import pint
 import xarray as xr
 
 from pymc_vcc.io.plausibility import check_plausible
+from pymc_vcc.physics.components.moist_air import ATMOSPHERIC_PRESSURE
+from pymc_vcc.physics.csv_cells import DECIMAL_COMMA, MISSING_CELLS, is_number, split_header_unit
 from pymc_vcc.physics.cycles import INPUTS, MEASURABLE_OUTPUT_INFO
 from pymc_vcc.physics.inputs import INPUT_IDS, make_inputs
+from pymc_vcc.physics.quantities import (
+    QUANTITY_OF_UNIT,
+    UNIT_EXAMPLES,
+    time_unit_seconds,
+    unit_converter,
+)
 
 EXAMPLE_LOG = "example_log.csv"
 """File name of the example field log inside ``pymc_vcc/data``."""
-
-ATMOSPHERIC_PRESSURE = 101325.0
-"""Default ambient pressure added to gauge pressures, Pa."""
 
 STEPPED_INPUTS: tuple[str, ...] = tuple(spec.id for spec in INPUTS if spec.stepped)
 """Inputs a controller sets in steps (the split unit's valve opening and compressor speed):
 resampled by nearest sample, and held without averaging across a step (each step starts a new
 hold block)."""
 
-QUANTITY_OF_UNIT: dict[str, str] = {
-    "K": "temperature",
-    "Pa": "pressure",
-    "kg/s": "mass_flow",
-    "1": "fraction",
-    "Hz": "speed",
-    "W": "power",
-}
-"""The physical quantity (as :func:`unit_converter` names it) of each SI unit an input or output
-is declared in."""
-
-_SI_UNIT = {
-    quantity: "dimensionless" if unit == "1" else unit
-    for unit, quantity in QUANTITY_OF_UNIT.items()
-}
-_EXAMPLES = {
-    "temperature": "K, degC, °C, C, degF, °F, F",
-    "pressure": "Pa, kPa, MPa, bar, psi, atm; gauge: barg, bar(g), kPag, psig",
-    "mass_flow": "kg/s, g/s, kg/h, lb/min, lb/h",
-    "fraction": "1, %",
-    "speed": "Hz, rps, rpm, 1/min",
-    "power": "W, kW",
-}
-_ALIASES = {
-    "temperature": {"C": "degC", "F": "degF"},
-    "fraction": {"fraction": "dimensionless", "-": "dimensionless"},
-}
-_GAUGE_SUFFIXES = ("(g)", "g")
-_ABSOLUTE_SUFFIXES = ("(a)", "a")
-_MISSING = ("", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "none", "None", "-")
-_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
 _DOTTED_DATE = re.compile(r"^\s*\d{1,2}\.\d{1,2}\.\d{2,4}")
-
-
-@cache
-def _registry() -> pint.UnitRegistry:
-    """pint's registry with a revolution counted as 1, so that rpm / 60 = Hz = rev/s."""
-    registry = pint.UnitRegistry(on_redefinition="ignore")
-    registry.define("turn = 1 = revolution = cycle = rev")
-    return registry
-
-
-def _parse_unit(text: str, quantity: str) -> pint.Unit | None:
-    """The pint unit ``text`` names if it measures ``quantity``, else None."""
-    registry = _registry()
-    text = _ALIASES.get(quantity, {}).get(text, text)
-    try:
-        unit = registry.Unit(text)
-    except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError):
-        return None
-    target = registry.Unit(_SI_UNIT[quantity])
-    return unit if unit.dimensionality == target.dimensionality else None
-
-
-def unit_converter(
-    unit: str, quantity: str, atmospheric_pressure: float = ATMOSPHERIC_PRESSURE
-) -> Callable[[np.ndarray], np.ndarray]:
-    """A function converting values in ``unit`` to SI for ``quantity`` (with pint).
-
-    Quantities and their SI units: ``temperature`` (K), ``pressure`` (Pa, absolute; a ``g`` or
-    ``(g)`` suffix marks gauge, e.g. ``barg``: ``atmospheric_pressure`` Pa is added; ``a`` or
-    ``(a)`` marks absolute), ``mass_flow`` (kg/s), ``fraction`` (1; ``%`` allowed), ``speed``
-    (Hz = rev/s; ``rpm`` allowed). Any unit pint knows of the right dimension is accepted;
-    ``C`` and ``F`` mean °C and °F. Raises ``ValueError`` naming examples of allowed units.
-    """
-    text = unit.strip()
-    parsed = _parse_unit(text, quantity)
-    gauge = False
-    if parsed is None and quantity == "pressure":
-        for suffixes, is_gauge in ((_GAUGE_SUFFIXES, True), (_ABSOLUTE_SUFFIXES, False)):
-            stem = next((text[: -len(s)] for s in suffixes if text.endswith(s)), None)
-            if stem and (parsed := _parse_unit(stem.strip(), "pressure")) is not None:
-                gauge = is_gauge
-                break
-    if parsed is None:
-        raise ValueError(
-            f"unknown {quantity} unit {unit!r}; allowed are units of {quantity} such as "
-            f"{_EXAMPLES[quantity]}"
-        )
-    registry = _registry()
-    target = registry.Unit(_SI_UNIT[quantity])
-    offset = atmospheric_pressure if gauge else 0.0
-
-    def convert(values: np.ndarray) -> np.ndarray:
-        magnitudes = np.asarray(values, dtype=float)
-        return registry.Quantity(magnitudes, parsed).to(target).magnitude + offset
-
-    return convert
-
-
-def _time_unit_seconds(time_unit: str) -> float:
-    """Seconds in one ``time_unit`` (any pint unit of time: s, ms, min, h, ...)."""
-    registry = _registry()
-    try:
-        unit = registry.Unit(time_unit)
-    except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError):
-        unit = None
-    if unit is None or unit.dimensionality != registry.Unit("s").dimensionality:
-        raise ValueError(
-            f"unknown time_unit {time_unit!r}; allowed are units of time such as s, ms, min, h"
-        )
-    return float(registry.Quantity(1.0, unit).to("s").magnitude)
 
 
 @dataclass(frozen=True)
@@ -318,19 +220,13 @@ def _read_table(path: Path) -> tuple[_Table, str]:
     return _Table(header, cells, {}, 2), delimiter
 
 
-def _is_number(text: str, decimal: str) -> bool:
-    try:
-        float(text.replace(decimal, ".") if decimal != "." else text)
-    except ValueError:
-        return False
-    return True
-
-
 def _split_units_row(table: _Table, value_columns: list[str], decimal: str) -> _Table:
     """Take a row of units right under the header out of the data, if there is one: every
     value column's first cell is text that is not a number (e.g. ``degC``, ``bar``)."""
     first = [table.column(name).iloc[0] for name in value_columns]
-    if not all(cell and cell not in _MISSING and not _is_number(cell, decimal) for cell in first):
+    if not all(
+        cell and cell not in MISSING_CELLS and not is_number(cell, decimal) for cell in first
+    ):
         return table
     units_row = {name: table.column(name).iloc[0] for name in table.header}
     cells = table.cells.iloc[1:].reset_index(drop=True)
@@ -344,13 +240,13 @@ def _infer_decimal(table: _Table, value_columns: list[str], delimiter: str) -> s
     if delimiter == ",":
         return "."
     sample = pd.concat([table.column(name).head(50) for name in value_columns])
-    return "," if sample.str.match(_DECIMAL_COMMA).any() else "."
+    return "," if sample.str.match(DECIMAL_COMMA).any() else "."
 
 
 def _column_values(path: Path, table: _Table, name: str, decimal: str) -> np.ndarray:
     """The numbers of file column ``name`` (NaN where empty); a non-number is an error."""
     text = table.column(name)
-    missing = text.isin(_MISSING)
+    missing = text.isin(MISSING_CELLS)
     normalised = text.str.replace(decimal, ".", regex=False) if decimal != "." else text
     values = pd.to_numeric(normalised.where(~missing), errors="coerce")
     bad = np.flatnonzero(values.isna() & ~missing)
@@ -375,8 +271,8 @@ def _parse_times(
     (``time_format`` if given, else ISO 8601 or the format pandas infers; day first when the
     date is written with dots). Zone-less date-times are taken as UTC."""
     cells = table.column(name)
-    if _is_number(cells.iloc[0], decimal):
-        scale = _time_unit_seconds(time_unit)
+    if is_number(cells.iloc[0], decimal):
+        scale = time_unit_seconds(time_unit)
         seconds = _column_values(path, table, name, decimal) * scale
     else:
         stamps = _datetimes(cells, time_format)
@@ -492,22 +388,6 @@ def _held_inputs(resampled: dict[str, np.ndarray], dt: float, hold: float) -> xr
     return make_inputs(time, **values)
 
 
-def _split_header_unit(column: str) -> tuple[str, str | None]:
-    """``"TD [degC]"`` or ``"TD (F)"`` -> (``"TD"``, unit); a bare name -> (name, None)."""
-    closing = {"]": "[", ")": "("}.get(column[-1:]) if column else None
-    if closing is None:
-        return column, None
-    depth = 0
-    for position in range(len(column) - 1, -1, -1):
-        char = column[position]
-        depth += char == column[-1]
-        depth -= char == closing
-        if depth == 0:
-            name, unit = column[:position].strip(), column[position + 1 : -1].strip()
-            return (name, unit) if name and unit else (column, None)
-    return column, None
-
-
 def load_measurements(
     path: str | Path,
     columns: Mapping[str, str],
@@ -533,8 +413,9 @@ def load_measurements(
             of :data:`~pymc_vcc.physics.cycles.MEASURABLE_OUTPUT_INFO` (the nine, and ``W_comp``
             in W or kW); other file columns are ignored. A file column may be named with or
             without its header unit.
-        units: file column -> unit (see :func:`unit_converter`); a column missing here carries
-            its unit in its header (``"name [unit]"`` or ``"name (unit)"``) or in the units row.
+        units: file column -> unit (see :func:`~pymc_vcc.physics.quantities.unit_converter`);
+            a column missing here carries its unit in its header (``"name [unit]"`` or
+            ``"name (unit)"``) or in the units row.
         time_column: the file column of the timestamps: numbers in ``time_unit`` or date-times.
         time_unit: unit of numeric timestamps (any unit of time: s, ms, min, h).
         time_format: ``strftime`` format of the date-times (e.g. ``"%d/%m/%Y %H:%M:%S"``);
@@ -588,7 +469,7 @@ def load_measurements(
         raise ValueError(f"columns must map at least one output of {list(MEASURABLE_OUTPUT_INFO)}")
 
     table, delimiter = _read_table(path)
-    bare = {_split_header_unit(name)[0]: name for name in table.header}
+    bare = {split_header_unit(name)[0]: name for name in table.header}
 
     def find(column: str) -> str:
         if column in table.header:
@@ -618,7 +499,7 @@ def load_measurements(
         unit = (
             given_units.get(column)
             or given_units.get(file_column)
-            or _split_header_unit(file_column)[1]
+            or split_header_unit(file_column)[1]
             or table.units_row.get(file_column)
         )
         quantity = QUANTITY_OF_UNIT[
@@ -627,7 +508,7 @@ def load_measurements(
         if unit is None:
             raise ValueError(
                 f"{path}: no unit for column {column!r} ({variable}); give units={{{column!r}: "
-                f"...}} with a unit of {quantity} such as {_EXAMPLES[quantity]}"
+                f"...}} with a unit of {quantity} such as {UNIT_EXAMPLES[quantity]}"
             )
         try:
             convert = unit_converter(unit, quantity, atmospheric_pressure)

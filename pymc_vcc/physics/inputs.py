@@ -14,7 +14,6 @@ any unit of the right kind (``degC``, ``%``, ``rpm``, ...), given in the header
 from __future__ import annotations
 
 import csv
-import re
 from collections.abc import Callable, Mapping
 from importlib import resources
 from pathlib import Path
@@ -23,8 +22,10 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
+from pymc_vcc.physics.csv_cells import DECIMAL_COMMA, MISSING_CELLS, is_number, split_header_unit
 from pymc_vcc.physics.cycles import INPUTS
 from pymc_vcc.physics.cycles.base import InputLayout
+from pymc_vcc.physics.quantities import QUANTITY_OF_UNIT, time_unit_seconds, unit_converter
 
 BUILTIN_PROFILE = "fig4_steps.csv"
 """File name of the built-in 2120 s step profile inside ``pymc_vcc/data``."""
@@ -124,26 +125,11 @@ def validate_inputs(inputs: xr.Dataset, layout: InputLayout = INPUTS) -> None:
 
 
 _CELSIUS = ("degC", "°C", "C", "℃", "celsius")
-_SECONDS_PER = {"s": 1.0, "sec": 1.0, "second": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
-_MISSING = ("", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "none", "None", "-")
-_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
-
-
-def _split_header_unit(column: str) -> tuple[str, str | None]:
-    """``"T_ambient [degC]"`` or ``"T_ambient (degC)"`` -> (name, unit); a bare name -> (name,
-    None)."""
-    column = column.strip()
-    for opening, closing in (("[", "]"), ("(", ")")):
-        if column.endswith(closing) and opening in column:
-            name, unit = column[:-1].rsplit(opening, 1)
-            if name.strip() and unit.strip():
-                return name.strip(), unit.strip()
-    return column, None
 
 
 def _converter(unit: str, input_id: str, source: str) -> Callable[[np.ndarray], np.ndarray]:
-    """Values in ``unit`` to the SI unit of ``input_id``: SI and °C directly, anything else
-    (``%``, ``rpm``, ``degF``, ...) with pint, as the measured-log reader converts."""
+    """Values in ``unit`` to the SI unit of ``input_id``: SI, °C and % directly, anything else
+    (``rpm``, ``degF``, ...) with pint, as the measured-log reader converts."""
     spec = INPUTS[input_id]
     if unit == spec.unit:
         return lambda values: values
@@ -151,8 +137,6 @@ def _converter(unit: str, input_id: str, source: str) -> Callable[[np.ndarray], 
         return lambda values: values + _CELSIUS_OFFSET
     if spec.unit == "1" and unit == "%":
         return lambda values: values / 100.0
-    from pymc_vcc.io.measurements import QUANTITY_OF_UNIT, unit_converter  # pint: other units
-
     try:
         return unit_converter(unit, QUANTITY_OF_UNIT[spec.unit])
     except ValueError as error:
@@ -190,7 +174,8 @@ def load_inputs_csv(
         column but the time must be named by an input id.
     time_column
         The column of the times: numbers from 0, strictly increasing, in ``time_unit`` (or
-        the unit its header or the units row gives: ``s``, ``ms``, ``min``, ``h``).
+        the unit its header or the units row gives: any unit of time, ``s``, ``ms``, ``min``,
+        ``h``, ...).
     time_unit
         Unit of the times when the file does not give one.
     decimal
@@ -225,14 +210,6 @@ def load_inputs_csv(
     )
 
 
-def _is_number(text: str, decimal: str) -> bool:
-    try:
-        float(text.replace(decimal, ".") if decimal != "." else text)
-    except ValueError:
-        return False
-    return True
-
-
 def _inputs_from_csv_text(
     text: str,
     source: str,
@@ -259,13 +236,14 @@ def _inputs_from_csv_text(
             raise ValueError(
                 f"{source}: every row needs {len(header)} values; line {number} has {len(row)}"
             )
-    names = [_split_header_unit(column)[0] for column in header]
+    names = [split_header_unit(column)[0] for column in header]
     if decimal not in (None, ".", ","):
         raise ValueError(f"decimal must be '.' or ',' (or None to infer it), got {decimal!r}")
     first_line = 2
     units_row: dict[str, str] = {}
     if all(
-        cell and cell not in _MISSING and not _is_number(cell, decimal or ".") for cell in rows[1]
+        cell and cell not in MISSING_CELLS and not is_number(cell, decimal or ".")
+        for cell in rows[1]
     ):
         units_row = dict(zip(header, rows[1], strict=True))
         rows = [header, *rows[2:]]
@@ -274,7 +252,7 @@ def _inputs_from_csv_text(
             raise ValueError(f"{source}: expected at least two rows under the units row")
     if decimal is None:
         cells = [cell for row in rows[1:] for cell in row]
-        decimal = "," if delimiter != "," and any(_DECIMAL_COMMA.match(c) for c in cells) else "."
+        decimal = "," if delimiter != "," and any(DECIMAL_COMMA.match(c) for c in cells) else "."
 
     given = dict(units or {})
     mapping = dict(columns or {})
@@ -315,7 +293,7 @@ def _inputs_from_csv_text(
         return (
             given.get(column)
             or given.get(names[index])
-            or _split_header_unit(column)[1]
+            or split_header_unit(column)[1]
             or units_row.get(column)
         )
 
@@ -323,7 +301,7 @@ def _inputs_from_csv_text(
         values = np.empty(len(rows) - 1)
         for row_number, row in enumerate(rows[1:]):
             cell = row[index]
-            if cell in _MISSING:
+            if cell in MISSING_CELLS:
                 values[row_number] = np.nan
                 continue
             try:
@@ -335,12 +313,10 @@ def _inputs_from_csv_text(
                 ) from None
         return values
 
-    seconds = _SECONDS_PER.get(unit_of(time_index) or time_unit)
-    if seconds is None:
-        raise ValueError(
-            f"{source}: time unit {unit_of(time_index) or time_unit!r}; allowed are "
-            f"{list(_SECONDS_PER)}"
-        )
+    try:
+        seconds = time_unit_seconds(unit_of(time_index) or time_unit)
+    except ValueError as error:
+        raise ValueError(f"{source}: {error}") from None
     values = {}
     for input_id, index in selected.items():
         convert = _converter(unit_of(index) or INPUTS[input_id].unit, input_id, source)

@@ -12,7 +12,6 @@ from pymc_vcc.io.measurements import (
     example_log_path,
     load_column_map,
     load_measurements,
-    unit_converter,
 )
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
 
@@ -124,43 +123,6 @@ def test_the_simulator_runs_on_measured_inputs_and_matches_after_start_up(exampl
     for name in outputs:
         relative = np.abs(simulated[name].values / observed[name].values - 1.0)
         assert np.median(relative) < 0.015, name
-
-
-@pytest.mark.parametrize(
-    ("unit", "quantity", "value", "si"),
-    [
-        ("degC", "temperature", 25.0, 298.15),
-        ("°C", "temperature", 0.0, 273.15),
-        ("degF", "temperature", 212.0, 373.15),
-        ("K", "temperature", 300.0, 300.0),
-        ("bar", "pressure", 10.0, 1e6),
-        ("barg", "pressure", 10.0, 1e6 + 101325.0),
-        ("bar(g)", "pressure", 0.0, 101325.0),
-        ("bara", "pressure", 1.0, 1e5),
-        ("kPa", "pressure", 500.0, 5e5),
-        ("psig", "pressure", 0.0, 101325.0),
-        ("MPa", "pressure", 2.5, 2.5e6),
-        ("g/s", "mass_flow", 20.0, 0.02),
-        ("kg/h", "mass_flow", 72.0, 0.02),
-        ("%", "fraction", 40.0, 0.4),
-        ("1", "fraction", 0.4, 0.4),
-        ("rpm", "speed", 3000.0, 50.0),
-        ("Hz", "speed", 50.0, 50.0),
-    ],
-)
-def test_unit_conversion(unit, quantity, value, si):
-    assert unit_converter(unit, quantity)(np.array([value]))[0] == pytest.approx(si)
-
-
-def test_gauge_pressure_uses_the_given_atmosphere():
-    assert unit_converter("barg", "pressure", 95000.0)(np.array([1.0]))[0] == 195000.0
-
-
-def test_unknown_unit_names_the_allowed_ones():
-    with pytest.raises(ValueError, match=r"unknown pressure unit 'kg'.*barg"):
-        unit_converter("kg", "pressure")
-    with pytest.raises(ValueError, match=r"unknown temperature unit 'Kelvins'.*degF"):
-        unit_converter("Kelvins", "temperature")
 
 
 # ----------------------------------------------------------------- small hand-made logs
@@ -373,22 +335,6 @@ def test_a_decimal_comma_in_a_comma_separated_file_says_what_to_do(tmp_path):
     path = _write(tmp_path / "log.csv", _rows([0, 1, 2], td='"70,5"'))
     with pytest.raises(ValueError, match=r"'70,5' is not a number \(set decimal=','"):
         load_measurements(path, COLUMNS, time_column="t")
-
-
-@pytest.mark.parametrize(
-    ("unit", "quantity", "value", "si"),
-    [
-        ("F", "temperature", 32.0, 273.15),
-        ("C", "temperature", 0.0, 273.15),
-        ("lb/min", "mass_flow", 60.0, 0.45359237),
-        ("atm", "pressure", 1.0, 101325.0),
-        ("kPag", "pressure", 0.0, 101325.0),
-        ("1/min", "speed", 60.0, 1.0),
-        ("percent", "fraction", 50.0, 0.5),
-    ],
-)
-def test_any_pint_unit_of_the_right_dimension(unit, quantity, value, si):
-    assert unit_converter(unit, quantity)(np.array([value]))[0] == pytest.approx(si)
 
 
 def test_a_step_of_a_commanded_input_starts_a_new_hold_block(tmp_path):

@@ -70,7 +70,10 @@ def test_csv_round_trip_converts_celsius(tmp_path):
         (HEADER.replace("[Hz]", "[rpm]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "outside the"),
         (HEADER.replace("valve_opening", "lev") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "'lev'"),
         (HEADER.replace("time [s]", "t [s]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "no 'time'"),
-        (HEADER.replace("time [s]", "time [weeks]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n", "weeks"),
+        (
+            HEADER.replace("time [s]", "time [kg]") + "0,0.4,55,35,27\n9,0.4,55,35,27\n",
+            "time_unit 'kg'",
+        ),
         (HEADER + "0,0.4,55,35,27\n9,0.4,fast,35,27\n", "line 3: 'fast' is not a number"),
         (HEADER + "0,0.4,55,35,27\n9,1.4,55,35,27\n", r"outside the allowed range"),
         (HEADER + "0,0.4,55,35\n9,0.4,55,35,27\n", "every row"),
@@ -82,6 +85,12 @@ def test_bad_csv_is_a_clear_error(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(ValueError, match=message):
         load_inputs_csv(path)
+
+
+def test_csv_times_in_any_unit_of_time(tmp_path):
+    path = tmp_path / "minutes.csv"
+    path.write_text(HEADER.replace("time [s]", "time [min]") + "0,0.4,55,35,27\n2,0.4,55,35,27\n")
+    assert load_inputs_csv(path)["time"].values.tolist() == [0.0, 120.0]
 
 
 def test_dataset_validation_checks_units():

@@ -20,7 +20,8 @@ from numba import njit
 from pymc_vcc.physics.components.smooth import smooth_pos
 
 ATMOSPHERIC_PRESSURE = 101325.0
-"""Pa."""
+"""Standard atmospheric pressure, Pa: the moist air's, and the ambient pressure a gauge pressure
+is read against unless told otherwise."""
 
 LATENT_HEAT_WATER = 2.45e6
 """Heat of condensation of water vapour near 10-20 °C, J/kg."""
