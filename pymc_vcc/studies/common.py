@@ -26,6 +26,7 @@ from pymc_vcc.execution.executors import (
     check_scheduler,
     make_executor,
 )
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.output_folder import OutputFolderError, atomic_path, claim_output_folder
 from pymc_vcc.inference.distances import BatchDistance
 from pymc_vcc.inference.noise import SensorNoise
@@ -155,16 +156,33 @@ class StudySettings:
         return get_budget(self.budget)
 
     def rejection_options(self) -> dict[str, Any]:
-        """Keyword arguments of the rejection samplers: the budget's Table I settings, progress."""
+        """Keyword arguments of the rejection samplers: the budget's Table I settings."""
         work = self.work
         return {
             "n_pilot": work.n_pilot,
             "quantile": work.quantile,
             "n_main": work.n_main,
             "n_desired": work.n_desired,
-            "progress": self.progress,
-            "time_limit": self.time_limit,
         }
+
+    def run_options(
+        self,
+        executor: Executor,
+        *,
+        seed: int | np.random.SeedSequence,
+        checkpoint: Path | None = None,
+    ) -> RunOptions:
+        """How one of the study's runs executes: on ``executor`` (from :meth:`open_executor`),
+        with this study's progress bars and time limit, from ``seed`` (derived from
+        :attr:`seed`), persisted at ``checkpoint`` (from :meth:`checkpoint` or
+        :meth:`checkpoint_folder`)."""
+        return RunOptions(
+            executor=executor,
+            checkpoint=checkpoint,
+            seed=seed,
+            time_limit=self.time_limit,
+            progress=self.progress,
+        )
 
     @contextmanager
     def claim_output(self, study: str) -> Iterator[None]:

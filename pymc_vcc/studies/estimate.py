@@ -511,10 +511,10 @@ def estimation_study(
                 noise=noise,
                 sensor_noise=sensor_noise,
                 distance=BATCH_DISTANCES[distance],
-                executor=executor,
-                checkpoint=settings.checkpoint_folder("estimate"),
-                seed=sampler_seed,
                 drift=drift,
+                run=settings.run_options(
+                    executor, seed=sampler_seed, checkpoint=settings.checkpoint_folder("estimate")
+                ),
                 **settings.rejection_options(),
             )
         predictive = [

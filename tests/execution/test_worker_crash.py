@@ -19,6 +19,7 @@ import pytest
 import xarray as xr
 
 from pymc_vcc.execution.executors import WorkerCrash, make_executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.model import add_simulator
@@ -167,15 +168,19 @@ def test_a_crash_leaves_the_other_chunks_alone(pool, tmp_path):
 
 
 def test_abc_counts_crashes_as_failures_and_matches_the_serial_run(pool, tmp_path):
-    settings = dict(
-        n_pilot=120, quantile=0.2, n_main=300, n_desired=300, distance=BASE.distance, seed=4
-    )
+    settings = dict(n_pilot=120, quantile=0.2, n_main=300, n_desired=300, distance=BASE.distance)
     prior = UniformPrior(BASE.bounds)
     checkpoint = tmp_path / "run.sqlite"
     crashed = abc_rejection(
-        CRASHING, prior, OBSERVED, executor=pool, checkpoint=checkpoint, **settings
+        CRASHING,
+        prior,
+        OBSERVED,
+        run=RunOptions(executor=pool, checkpoint=checkpoint, seed=4),
+        **settings,
     )
-    serial = abc_rejection(CRASHING.raising(), prior, OBSERVED, executor="serial", **settings)
+    serial = abc_rejection(
+        CRASHING.raising(), prior, OBSERVED, run=RunOptions(executor="serial", seed=4), **settings
+    )
 
     stats = crashed.sample_stats
     status = stats["sim_status"].values
@@ -199,7 +204,11 @@ def test_abc_counts_crashes_as_failures_and_matches_the_serial_run(pool, tmp_pat
     # crashes are checkpointed: a resumed run simulates nothing again (serially, the doomed
     # draws would now raise rather than crash)
     resumed = abc_rejection(
-        CRASHING.raising(), prior, OBSERVED, executor="serial", checkpoint=checkpoint, **settings
+        CRASHING.raising(),
+        prior,
+        OBSERVED,
+        run=RunOptions(executor="serial", checkpoint=checkpoint, seed=4),
+        **settings,
     )
     np.testing.assert_array_equal(resumed.sample_stats["sim_status"], status)
 
@@ -215,12 +224,12 @@ def test_an_item_over_its_time_limit_is_stopped_and_its_worker_replaced(pool):
 
 def test_abc_counts_runs_stopped_for_their_time_limit(pool):
     hanging = Crashing(BASE, ((2.0, 2.1, "hang"),))
-    settings = dict(n_pilot=60, quantile=0.2, n_main=60, n_desired=60, seed=4, time_limit=0.5)
+    settings = dict(n_pilot=60, quantile=0.2, n_main=60, n_desired=60)
     tree = abc_rejection(
         hanging,
         UniformPrior(BASE.bounds),
         OBSERVED,
-        executor=pool,
+        run=RunOptions(executor=pool, seed=4, time_limit=0.5),
         distance=BASE.distance,
         **settings,
     )

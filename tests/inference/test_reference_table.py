@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.store import CheckpointDamagedError, CheckpointMismatchError
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
@@ -35,8 +36,7 @@ def test_table_with_the_samplers_seed_gives_abc_rejections_posterior():
         quantile=0.2,
         n_desired=15,
         sensor_noise=NOISE,
-        executor="serial",
-        seed=7,
+        run=RunOptions(executor="serial", seed=7),
         **SIZES,
     )
     shared = table_rejection(
