@@ -67,6 +67,15 @@ class RunOptions:
         if not 0.0 < self.max_failure_rate <= 1.0:
             raise ValueError(f"max_failure_rate must lie in (0, 1], got {self.max_failure_rate}")
 
+    def refuse_checkpoint(self, entry: str) -> None:
+        """Refuse a checkpoint where ``entry`` (a function's name) keeps none.
+
+        Raises:
+            ValueError: :attr:`checkpoint` is set.
+        """
+        if self.checkpoint is not None:
+            raise ValueError(f"{entry} keeps no checkpoint; give RunOptions(checkpoint=None)")
+
     @contextmanager
     def open_executor(self) -> Iterator[Executor]:
         """The executor given, left open; or a new one of the kind given, closed on exit."""

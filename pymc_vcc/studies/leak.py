@@ -216,11 +216,7 @@ def shared_table(
         template,
         n_pilot=work.n_pilot,
         n_main=work.n_main,
-        executor=executor,
-        checkpoint=settings.checkpoint_folder(name),
-        seed=seed,
-        time_limit=settings.time_limit,
-        progress=settings.progress,
+        run=settings.run_options(executor, seed=seed, checkpoint=settings.checkpoint_folder(name)),
     )
 
 

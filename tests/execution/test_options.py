@@ -45,3 +45,9 @@ def test_a_kind_opens_its_worker_count():
     with RunOptions(executor="processes", n_workers=1).open_executor() as opened:
         assert opened.n_workers == 1
         assert opened.map(abs, [-3]) == [3]
+
+
+def test_a_checkpoint_is_refused_where_the_run_keeps_none(tmp_path):
+    RunOptions().refuse_checkpoint("simulate_predictive")
+    with pytest.raises(ValueError, match="simulate_predictive keeps no checkpoint"):
+        RunOptions(checkpoint=tmp_path / "c.sqlite").refuse_checkpoint("simulate_predictive")

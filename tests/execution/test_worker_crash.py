@@ -243,18 +243,22 @@ def test_predictive_and_sensitivity_count_crashed_runs(pool):
     mu = np.linspace(-1.0, 1.0, 40).reshape(2, 20)
     mu[0, 3], mu[1, 7], mu[1, 8] = 2.04, -2.42, -2.42
     posterior = xr.DataTree.from_dict({"posterior": xr.Dataset({"mu": (("chain", "draw"), mu)})})
-    tree = simulate_predictive(posterior, CRASHING, executor=pool, seed=1)
+    tree = simulate_predictive(posterior, CRASHING, run=RunOptions(executor=pool, seed=1))
     predictive = tree["posterior_predictive"]
     assert predictive.attrs["n_failed"] == 3
     assert predictive.attrs["failure_kinds"] == "worker-crash: 3"
     failed = np.isnan(tree["posterior_predictive"]["y"]).all("time")
     np.testing.assert_array_equal(failed, CRASHING.doomed(mu))
 
-    settings = dict(n_base=16, window=None, seed=2, n_resamples=10)
+    settings = dict(n_base=16, window=None, n_resamples=10)
     bounds = {"mu": (-3.0, 3.0)}
     crashing = Crashing(BASE, ((1.1, 1.15, "segfault"), (-2.05, -2.0, "exit")))
-    crashed = sobol_indices(crashing, bounds, ["y"], executor=pool, **settings)
-    serial = sobol_indices(crashing.raising(), bounds, ["y"], executor="serial", **settings)
+    crashed = sobol_indices(
+        crashing, bounds, ["y"], run=RunOptions(executor=pool, seed=2), **settings
+    )
+    serial = sobol_indices(
+        crashing.raising(), bounds, ["y"], run=RunOptions(executor="serial", seed=2), **settings
+    )
     assert crashed.attrs["n_failed"] == serial.attrs["n_failed"] == 2
     assert "worker-crash: worker process died" in crashed.attrs["failure_reasons"]
     xr.testing.assert_equal(crashed.drop_attrs(), serial.drop_attrs())

@@ -160,7 +160,7 @@ def test_prior_bounds_outside_the_units_are_refused_by_every_sampler():
     with pytest.raises(ValueError, match=message), pm.Model():
         add_simulator("vcc", simulator, observed, prior=wide)
     with pytest.raises(ValueError, match=message):
-        sobol_indices(simulator, wide, ["PD"], executor="serial")
+        sobol_indices(simulator, wide, ["PD"], run=RunOptions(executor="serial"))
     extrapolating = VCCSimulator(parameters=["M0"], outputs=["PD"], allow_outside_unit_bounds=True)
     check_prior_support(check_simulator(extrapolating).support, wide)  # asked for: allowed
     check_prior_support(check_simulator(simulator).support, {"M0": (1.0, 2.0)})
