@@ -67,6 +67,12 @@ class RunOptions:
         if not 0.0 < self.max_failure_rate <= 1.0:
             raise ValueError(f"max_failure_rate must lie in (0, 1], got {self.max_failure_rate}")
 
+    def seed_sequence(self) -> np.random.SeedSequence:
+        """The run's :attr:`seed` as a SeedSequence (fresh entropy for None)."""
+        if isinstance(self.seed, np.random.SeedSequence):
+            return self.seed
+        return np.random.SeedSequence(self.seed)
+
     def refuse_checkpoint(self, entry: str) -> None:
         """Refuse a checkpoint where ``entry`` (a function's name) keeps none.
 

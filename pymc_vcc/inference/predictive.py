@@ -193,9 +193,7 @@ def simulate_predictive(
             for name in noise_names
         ]
     )
-    seed = run.seed
-    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    seeds = root.spawn(n_chains * n_draws)
+    seeds = run.seed_sequence().spawn(n_chains * n_draws)
     items = [
         ({name: float(values[name][i]) for name in parameters}, scales[i], seeds[i])
         for i in range(n_chains * n_draws)

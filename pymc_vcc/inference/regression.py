@@ -422,8 +422,7 @@ def regression_abc(
     _check_fraction("accept", accept, 0.0, 1.0)
     check_draws(int(n), len(prior.names), accept)
     run = run or RunOptions()
-    seed = run.seed
-    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    root = run.seed_sequence()
     boxes, failed = [], 0
     with run.open_executor() as running:
         for index, round_seed in enumerate(root.spawn(int(rounds))):

@@ -1,5 +1,6 @@
 """RunOptions: refused settings, and the executor it opens (or leaves open)."""
 
+import numpy as np
 import pytest
 
 from pymc_vcc.execution.executors import SerialExecutor
@@ -51,3 +52,10 @@ def test_a_checkpoint_is_refused_where_the_run_keeps_none(tmp_path):
     RunOptions().refuse_checkpoint("simulate_predictive")
     with pytest.raises(ValueError, match="simulate_predictive keeps no checkpoint"):
         RunOptions(checkpoint=tmp_path / "c.sqlite").refuse_checkpoint("simulate_predictive")
+
+
+def test_the_seed_as_a_seed_sequence():
+    given = np.random.SeedSequence(3, spawn_key=(1,))
+    assert RunOptions(seed=given).seed_sequence() is given
+    assert RunOptions(seed=5).seed_sequence().entropy == 5
+    assert RunOptions().seed_sequence().entropy != RunOptions().seed_sequence().entropy  # fresh

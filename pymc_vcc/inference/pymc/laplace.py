@@ -192,11 +192,7 @@ def fit_reference(
     places = [expit(np.clip(origin, -FIT_BOUND, FIT_BOUND))]
     places += [rng.uniform(0.1, 0.9, dimension) for _ in range(starts - 1)]
     with run.open_executor() as opened:
-        residuals = _Residuals(
-            model,
-            opened,
-            seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed),
-        )
+        residuals = _Residuals(model, opened, run.seed_sequence())
         if residuals.batch(origin[np.newaxis])[0] is None:
             raise RuntimeError(
                 "the fit's starting point (the prior's initial point) failed to simulate; "
