@@ -53,6 +53,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "pymc_vcc.inference.rejection": ("abc_rejection", "TooManyFailuresError"),
     "pymc_vcc.inference.sequential": ("sequential_calibration", "SequentialResult"),
     "pymc_vcc.execution.executors": ("make_executor", "Executor", "WorkerCrash"),
+    "pymc_vcc.execution.options": ("RunOptions",),
     "pymc_vcc.execution.store": ("CheckpointMismatchError",),
     "pymc_vcc.inference.pymc.model": ("add_simulator", "gmm_prior_variable"),
     "pymc_vcc.inference.pymc.smc": ("sample_smc_abc", "ParallelIMH"),

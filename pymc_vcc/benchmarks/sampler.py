@@ -17,7 +17,8 @@ import time
 
 import numpy as np
 
-from pymc_vcc.execution.executors import Executor, make_executor
+from pymc_vcc.execution.executors import Executor, ExecutorKind, make_executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.testing import GaussianLocation, Slow
@@ -28,7 +29,11 @@ OBSERVED = MODEL({"mu": 0.5}, np.random.default_rng(0))
 
 
 def _seconds_per_simulation(
-    simulator: object, executor: Executor | str, n_pilot: int, n_main: int, **options: object
+    simulator: object,
+    executor: Executor | ExecutorKind,
+    n_pilot: int,
+    n_main: int,
+    **options: object,
 ) -> float:
     start = time.perf_counter()
     tree = abc_rejection(
@@ -39,9 +44,7 @@ def _seconds_per_simulation(
         quantile=0.1,
         n_main=n_main,
         n_desired=n_main,
-        executor=executor,
-        seed=1,
-        progress=False,
+        run=RunOptions(executor=executor, seed=1, progress=False),
         **options,
     )
     return (time.perf_counter() - start) / int(tree.sample_stats["n_simulations"])

@@ -29,6 +29,7 @@ import pymc as pm
 from pymc.smc.kernels import IMH
 
 from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import add_simulator
@@ -176,9 +177,7 @@ def _accuracy(quick: bool) -> dict[str, float | int]:
                 UniformPrior(simulator.bounds),
                 observed,
                 **({} if distance is None else {"distance": distance}),
-                executor="serial",
-                seed=seed,
-                progress=False,
+                run=RunOptions(executor="serial", seed=seed, progress=False),
             )
             errors.append(_error(_draws(tree["posterior"], names), mean, sd))
             counts.append(int(tree["sample_stats"]["n_simulations"]))

@@ -57,7 +57,6 @@ from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator
 from concurrent import futures
-from contextlib import contextmanager
 from dataclasses import dataclass
 from itertools import islice
 from typing import Any, ClassVar, Literal
@@ -521,15 +520,3 @@ def make_executor(
     if kind == "dask":
         return DaskExecutor(address=address, n_workers=n_workers)
     raise ValueError(f"unknown executor kind {kind!r}; choose one of {list(EXECUTOR_KINDS)}")
-
-
-@contextmanager
-def executor_scope(
-    executor: Executor | ExecutorKind, n_workers: int | None = None
-) -> Iterator[Executor]:
-    """Use ``executor`` if it is one (left open), else make one of that kind and close it after."""
-    if isinstance(executor, Executor):
-        yield executor
-        return
-    with make_executor(executor, n_workers=n_workers) as made:
-        yield made

@@ -23,7 +23,8 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
+from pymc_vcc.execution.executors import WorkerCrash
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.likelihood import innovations
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.series import ObservedData, prepare_observed
@@ -204,9 +205,7 @@ def identifiability(
     parameters: Sequence[str] | None = None,
     prior_sd: Mapping[str, float] | None = None,
     step: float = 0.1,
-    executor: Executor | ExecutorKind = "processes",
-    n_workers: int | None = None,
-    time_limit: float | None = None,
+    run: RunOptions | None = None,
 ) -> Identifiability:
     """What noisy data from ``simulator``'s runs would tell about ``parameters`` near ``at``.
 
@@ -225,14 +224,15 @@ def identifiability(
         prior_sd: each parameter's prior sd, SI units (default: a uniform prior over the
             simulator's bounds, width / √12).
         step: central-difference half-step, in prior sds (one-sided at a bound).
-        executor, n_workers: where the 2·d perturbed simulations run (see
-            :func:`~pymc_vcc.inference.sensitivity.sobol_indices`).
-        time_limit: wall-time limit of one simulation, s.
+        run: where the 2·d perturbed simulations run, and their time limit (no checkpoint;
+            the simulations are seeded with 0, so no ``seed`` either).
 
     Returns:
         The :class:`Identifiability` at the point; print it for the table and the directions
         the data do not identify.
     """
+    run = run or RunOptions()
+    run.refuse_checkpoint("identifiability")
     info = check_simulator(simulator)
     names = tuple(parameters if parameters is not None else (info.parameter_names or ()))
     if not names:
@@ -287,9 +287,9 @@ def identifiability(
     thetas = [
         {**point, name: value} for name, pair in zip(names, moves, strict=True) for value in pair
     ]
-    with executor_scope(executor, n_workers) as opened:
+    with run.open_executor() as opened:
         results = opened.map(
-            _Perturbed(simulator, template, time_limit), thetas, time_limit=time_limit
+            _Perturbed(simulator, template, run.time_limit), thetas, time_limit=run.time_limit
         )
 
     columns, failed = [], {}

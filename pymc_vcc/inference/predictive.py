@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
+from pymc_vcc.execution.executors import WorkerCrash
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.noise import (
     OutputNoise,
     SensorNoise,
@@ -78,13 +79,13 @@ class PredictiveRun:
 
     simulator: Simulator
     layout: ObservedData
-    time_limit_s: float | None
+    time_limit: float | None
 
     def __call__(self, item: tuple[dict[str, float], np.ndarray, np.random.SeedSequence]):
         theta, scales, seed = item
         rng = np.random.default_rng(seed)
         recorder = _TimeAndUnits(self.simulator)
-        outcome = run_simulation(recorder, theta, rng, self.layout, time_limit_s=self.time_limit_s)
+        outcome = run_simulation(recorder, theta, rng, self.layout, time_limit_s=self.time_limit)
         if not outcome.ok:
             return None, outcome.status, outcome.reason, None, None
         values = outcome.values
@@ -133,10 +134,7 @@ def simulate_predictive(
     noise: bool = True,
     sensor_noise: SensorNoise | None = None,
     max_draws: int | None = None,
-    executor: Executor | ExecutorKind = "processes",
-    n_workers: int | None = None,
-    seed: int | np.random.SeedSequence | None = None,
-    time_limit_s: float | None = None,
+    run: RunOptions | None = None,
 ) -> xr.DataTree:
     """Simulate posterior draws with ``simulator``: ``idata`` with ``posterior_predictive``.
 
@@ -158,16 +156,16 @@ def simulate_predictive(
             ``noise``), its kind per output told by the outputs' ``units``; a learnable
             scale ``sigma_<output>`` in the posterior replaces the fixed scale draw by draw.
         max_draws: simulate at most this many posterior draws, evenly thinned (default: all).
-        executor: an executor, or a kind (``"serial"``, ``"processes"``, ``"dask"``).
-        n_workers: workers of an executor made here.
-        seed: seeds the simulations' random streams (noise, stochastic simulators).
-        time_limit_s: wall-time limit of one simulation, s; longer runs count as failed.
+        run: where and how the simulations run (no checkpoint, no progress bar); its
+            ``seed`` seeds the simulations' random streams (noise, stochastic simulators).
 
     Returns:
         A copy of ``idata`` with group ``posterior_predictive`` (its attrs give the draws
         simulated, failed and the failure kinds) and, if ``reference`` is given,
         ``observed_data`` holding it.
     """
+    run = run or RunOptions()
+    run.refuse_checkpoint("simulate_predictive")
     if "posterior" not in idata.children:
         raise ValueError("idata has no posterior group")
     posterior = _selected_draws(idata["posterior"].to_dataset(), max_draws)
@@ -195,19 +193,18 @@ def simulate_predictive(
             for name in noise_names
         ]
     )
-    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    seeds = root.spawn(n_chains * n_draws)
+    seeds = run.seed_sequence().spawn(n_chains * n_draws)
     items = [
         ({name: float(values[name][i]) for name in parameters}, scales[i], seeds[i])
         for i in range(n_chains * n_draws)
     ]
-    with executor_scope(executor, n_workers) as pool:
+    with run.open_executor() as pool:
         results = [
             (None, result.kind, result.reason, None, None)
             if isinstance(result, WorkerCrash)
             else result
             for result in pool.map(
-                PredictiveRun(simulator, layout, time_limit_s), items, time_limit=time_limit_s
+                PredictiveRun(simulator, layout, run.time_limit), items, time_limit=run.time_limit
             )
         ]
 

@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
+from pymc_vcc.execution.executors import WorkerCrash
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.outcomes import OK, crash_outcome
 from pymc_vcc.execution.output_folder import atomic_path
 from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
@@ -214,12 +215,7 @@ def simulate_table(
     *,
     n_pilot: int,
     n_main: int,
-    executor: Executor | ExecutorKind = "processes",
-    n_workers: int | None = None,
-    checkpoint: str | Path | None = None,
-    seed: int | np.random.SeedSequence | None = None,
-    time_limit: float | None = None,
-    progress: bool | None = None,
+    run: RunOptions | None = None,
 ) -> ReferenceTable:
     """Simulate the ``n_pilot`` + ``n_main`` prior draws ``abc_rejection`` would make.
 
@@ -228,11 +224,12 @@ def simulate_table(
         prior: distribution of the model parameters (no noise scales: the table is noise-free).
         observed: any dataset on the data's grid: selects and orders the outputs stored.
         n_pilot, n_main: draws of the pilot and main phases (as ``abc_rejection``'s).
-        executor, n_workers, time_limit, progress: as for ``abc_rejection``.
-        checkpoint: folder persisting each finished chunk; a build started again with the same
-            arguments resumes there.
-        seed: integer or SeedSequence of the draws (and of ``abc_rejection``'s noise streams).
+        run: where and how the simulations run, as for ``abc_rejection``: its ``seed`` draws
+            the parameters (and seeds ``abc_rejection``'s noise streams), and its
+            ``checkpoint`` is a folder persisting each finished chunk (a build started again
+            with the same arguments resumes there).
     """
+    run = run or RunOptions()
     for name, value in (("n_pilot", n_pilot), ("n_main", n_main)):
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
@@ -245,7 +242,7 @@ def simulate_table(
     info = check_simulator(simulator)
     data = prepare_observed_for(info, observed, None)
     check_prior_support(info.support, prior.bounds)
-    entropy, spawn_key = split_seed(seed)
+    entropy, spawn_key = split_seed(run.seed)
     settings = {
         "n_pilot": int(n_pilot),
         "n_main": int(n_main),
@@ -254,10 +251,10 @@ def simulate_table(
         "parameters": list(prior.names),
         "prior_digest": array_digest(*(v.values for _, v in sorted(prior.to_dataset().items()))),
         "simulator": describe_callable(simulator),
-        "time_limit": time_limit,
+        "time_limit": run.time_limit,
         "spawn_key": list(spawn_key),
     }
-    store, entropy = _open_checkpoint(checkpoint, settings, entropy)
+    store, entropy = _open_checkpoint(run.checkpoint, settings, entropy)
     sizes = {PILOT: int(n_pilot), MAIN: int(n_main)}
     thetas = {
         phase: prior.sample(size, simulation_rng(entropy, spawn_key, prior_stream(phase), 0))
@@ -270,10 +267,7 @@ def simulate_table(
         thetas,
         store,
         (entropy, spawn_key),
-        executor=executor,
-        n_workers=n_workers,
-        time_limit=time_limit,
-        progress=progress,
+        run,
     )
 
 
@@ -283,12 +277,7 @@ def simulate_draws(
     thetas: np.ndarray,
     observed: OutputData,
     *,
-    executor: Executor | ExecutorKind = "processes",
-    n_workers: int | None = None,
-    checkpoint: str | Path | None = None,
-    seed: int | np.random.SeedSequence | None = None,
-    time_limit: float | None = None,
-    progress: bool | None = None,
+    run: RunOptions | None = None,
 ) -> ReferenceTable:
     """Noise-free simulations of given parameter sets: a table with only a main phase.
 
@@ -297,11 +286,12 @@ def simulate_draws(
         names: the parameters, the columns of ``thetas`` (model parameters only).
         thetas: the parameter sets, (n, len(names)), in SI units.
         observed: any dataset on the data's grid: selects and orders the outputs stored.
-        executor, n_workers, time_limit, progress: as for :func:`simulate_table`.
-        checkpoint: folder persisting each finished chunk; a run started again with the same
-            arguments simulates only the rest.
-        seed: integer or SeedSequence of the simulations' random streams.
+        run: where and how the simulations run, as for :func:`simulate_table`: its ``seed``
+            seeds the simulations' random streams, and its ``checkpoint`` is a folder
+            persisting each finished chunk (a run started again with the same arguments
+            simulates only the rest).
     """
+    run = run or RunOptions()
     thetas = np.asarray(thetas, dtype=float)
     if thetas.ndim != 2 or thetas.shape[1] != len(names) or thetas.shape[0] == 0:
         raise ValueError(
@@ -317,17 +307,17 @@ def simulate_draws(
             for name, column in zip(names, thetas.T, strict=True)
         },
     )
-    entropy, spawn_key = split_seed(seed)
+    entropy, spawn_key = split_seed(run.seed)
     settings = {
         "outputs": list(data.names),
         "n_time": int(data.values.shape[1]),
         "parameters": list(names),
         "draws_digest": array_digest(thetas),
         "simulator": describe_callable(simulator),
-        "time_limit": time_limit,
+        "time_limit": run.time_limit,
         "spawn_key": list(spawn_key),
     }
-    store, entropy = _open_checkpoint(checkpoint, settings, entropy)
+    store, entropy = _open_checkpoint(run.checkpoint, settings, entropy)
     return _simulate_rows(
         simulator,
         data,
@@ -335,10 +325,7 @@ def simulate_draws(
         {MAIN: thetas},
         store,
         (entropy, spawn_key),
-        executor=executor,
-        n_workers=n_workers,
-        time_limit=time_limit,
-        progress=progress,
+        run,
     )
 
 
@@ -360,13 +347,10 @@ def _simulate_rows(
     thetas: dict[int, np.ndarray],
     store: _TableCheckpoint | None,
     seed: tuple[int, tuple[int, ...]],
-    *,
-    executor: Executor | ExecutorKind,
-    n_workers: int | None,
-    time_limit: float | None,
-    progress: bool | None,
+    run: RunOptions,
 ) -> ReferenceTable:
-    """Simulate every row of ``thetas`` (phase -> draws) not yet in ``store``; the table."""
+    """Simulate every row of ``thetas`` (phase -> draws) not yet in ``store``, as ``run``
+    says; the table."""
     entropy, spawn_key = seed
     sizes = {phase: rows.shape[0] for phase, rows in thetas.items()}
     shape = data.values.shape
@@ -386,17 +370,17 @@ def _simulate_rows(
 
     for row in store.load() if store is not None else []:
         record(*row)
-    task = _TableTask(simulator, data, names, entropy, spawn_key, time_limit)
+    task = _TableTask(simulator, data, names, entropy, spawn_key, run.time_limit)
     with (
-        executor_scope(executor, n_workers) as pool,
-        PhaseProgress(progress_enabled(progress)) as bar,
+        run.open_executor() as pool,
+        PhaseProgress(progress_enabled(run.progress)) as bar,
         _flushing(store),
     ):
         for phase, size in sizes.items():
             todo = [index for index in range(size) if not status[phase][index]]
             bar.start_phase(f"{PHASE_NAMES[phase]:5s}", size, size - len(todo))
             items = ((phase, index, thetas[phase][index]) for index in todo)
-            for chunk in pool.imap_chunks(task, items, batched=True, time_limit=time_limit):
+            for chunk in pool.imap_chunks(task, items, batched=True, time_limit=run.time_limit):
                 rows = [
                     (phase, todo[position], None, *_crash(result))
                     if isinstance(result, WorkerCrash)

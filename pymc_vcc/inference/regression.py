@@ -49,7 +49,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +58,7 @@ from sklearn.linear_model import RidgeCV
 from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind, executor_scope
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.outcomes import OK
 from pymc_vcc.inference.distances import output_scales, window_means
 from pymc_vcc.inference.noise import (
@@ -325,13 +325,11 @@ def _regression_round(
     widen: float,
     accept: float,
     sensor_noise: SensorNoise | None,
-    executor: Executor,
-    checkpoint: Path | None,
+    run: RunOptions,
     seed: np.random.SeedSequence,
-    time_limit: float | None,
-    progress: bool | None,
 ) -> _Round:
-    """One round (module docstring, steps 1–6)."""
+    """One round (module docstring, steps 1–6), its simulations as ``run`` says, from
+    ``seed``."""
     box_seed, noise_seed, simulation_seed, resample_seed = seed.spawn(4)
     box = posterior_box(posterior, prior, widen)
     draws = prior.sample_in_box(box, n, np.random.default_rng(box_seed))
@@ -351,11 +349,7 @@ def _regression_round(
         model,
         draws[:, columns],
         observed,
-        executor=executor,
-        checkpoint=checkpoint,
-        seed=simulation_seed,
-        time_limit=time_limit,
-        progress=progress,
+        run=replace(run, seed=simulation_seed),
     )
     (phase,) = table.values
     finished = table.status[phase] == OK
@@ -395,12 +389,7 @@ def regression_abc(
     widen: float = WIDEN,
     accept: float = ACCEPT,
     sensor_noise: SensorNoise | None = None,
-    executor: Executor | ExecutorKind = "processes",
-    n_workers: int | None = None,
-    checkpoint: str | Path | None = None,
-    seed: int | np.random.SeedSequence | None = None,
-    time_limit: float | None = None,
-    progress: bool | None = None,
+    run: RunOptions | None = None,
 ) -> xr.DataTree:
     """The regression-adjusted posterior of ``observed`` around ``posterior`` (module docstring).
 
@@ -415,9 +404,9 @@ def regression_abc(
         accept: fraction of the draws kept, nearest in summaries to the data.
         sensor_noise: sensor noise of the data (learnable scales ``sigma_<output>`` in the
             prior replace its fixed ones); None: only the prior's ν, if any.
-        executor, n_workers, time_limit, progress: where and how the simulations run.
-        checkpoint: folder persisting each finished chunk of simulations (a subfolder a round).
-        seed: integer or SeedSequence of the draws, the noise and the resampling.
+        run: where and how the simulations run; its ``checkpoint`` is a folder persisting
+            each finished chunk of simulations (a subfolder a round), its ``seed`` seeds the
+            draws, the noise and the resampling.
 
     Returns:
         A DataTree: ``posterior`` (1 chain, the last round's accepted draws adjusted and
@@ -432,9 +421,10 @@ def regression_abc(
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
     _check_fraction("accept", accept, 0.0, 1.0)
     check_draws(int(n), len(prior.names), accept)
-    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    run = run or RunOptions()
+    root = run.seed_sequence()
     boxes, failed = [], 0
-    with executor_scope(executor, n_workers) as running:
+    with run.open_executor() as running:
         for index, round_seed in enumerate(root.spawn(int(rounds))):
             last = _regression_round(
                 simulator,
@@ -445,11 +435,14 @@ def regression_abc(
                 widen,
                 accept,
                 sensor_noise,
-                running,
-                None if checkpoint is None else Path(checkpoint) / f"round_{index}",
+                replace(
+                    run,
+                    executor=running,
+                    checkpoint=None
+                    if run.checkpoint is None
+                    else Path(run.checkpoint) / f"round_{index}",
+                ),
                 round_seed,
-                time_limit,
-                progress,
             )
             posterior = xr.Dataset(
                 {

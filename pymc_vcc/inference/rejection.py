@@ -23,13 +23,13 @@ import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
 from pymc_vcc import __version__
-from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
+from pymc_vcc.execution.executors import Executor, WorkerCrash
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.outcomes import OK, crash_outcome
 from pymc_vcc.execution.progress import PhaseProgress, progress_enabled
 from pymc_vcc.execution.store import (
@@ -203,9 +203,7 @@ class AcceptanceScan:
         return self.stop is not None
 
 
-def _check_settings(
-    n_pilot: int, quantile: float, n_main: int, n_desired: int, max_failure_rate: float
-) -> None:
+def _check_settings(n_pilot: int, quantile: float, n_main: int, n_desired: int) -> None:
     for name, value in (("n_pilot", n_pilot), ("n_main", n_main), ("n_desired", n_desired)):
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
@@ -216,8 +214,6 @@ def _check_settings(
             f"n_desired={n_desired} exceeds n_main={n_main}: the main phase cannot accept more "
             "draws than it makes"
         )
-    if not 0.0 < max_failure_rate <= 1.0:
-        raise ValueError(f"max_failure_rate must lie in (0, 1], got {max_failure_rate}")
 
 
 def prepare_observed_for(
@@ -332,13 +328,7 @@ def abc_rejection(
     sensor_noise: SensorNoise | None = None,
     outputs: Sequence[str] | None = None,
     distance: BatchDistance = ks_distances,
-    executor: Executor | ExecutorKind = "processes",
-    n_workers: int | None = None,
-    checkpoint: str | Path | None = None,
-    seed: int | np.random.SeedSequence | None = None,
-    time_limit: float | None = None,
-    max_failure_rate: float = 0.5,
-    progress: bool | None = None,
+    run: RunOptions | None = None,
 ) -> xr.DataTree:
     """ABC rejection with a pilot-quantile threshold (the paper's Algorithm 1, one dataset).
 
@@ -359,17 +349,11 @@ def abc_rejection(
         outputs: outputs compared (default: all observed ones).
         distance: batch distance, (N, n_outputs, m) and (n_outputs, n) → (N,); default: the
             paper's KS distance.
-        executor: an :class:`~pymc_vcc.execution.executors.Executor`, or ``"serial"``,
-            ``"processes"``
-            (default, all cores) or ``"dask"`` (a new local cluster).
-        n_workers: workers of an executor made here (default: all cores).
-        checkpoint: SQLite file persisting finished simulations; a run started again with the
-            same arguments resumes there and recomputes nothing finished.
-        seed: integer or SeedSequence; the same seed gives the same result on any executor.
-        time_limit: wall-time limit of one simulation, s; slower runs count as failed.
-        max_failure_rate: stop with :class:`TooManyFailuresError` when more than this fraction
-            of a phase's simulations (after its first 50) fail.
-        progress: show a progress bar (default: when standard error is a terminal).
+        run: where and how the simulations run (default: every core, fresh entropy, no
+            checkpoint); its ``checkpoint`` is an SQLite file persisting finished simulations
+            (a run started again with the same arguments resumes there and recomputes nothing
+            finished), and more than ``max_failure_rate`` of a phase's simulations failing
+            (after its first 50) stops the run with :class:`TooManyFailuresError`.
 
     Returns:
         An ArviZ DataTree with groups ``posterior`` (accepted θ, chain × draw), ``prior`` (every
@@ -383,9 +367,8 @@ def abc_rejection(
         TooManyFailuresError: most simulations failed.
     """
     started = time.perf_counter()
-    _check_settings(n_pilot, quantile, n_main, n_desired, max_failure_rate)
-    if time_limit is not None and not time_limit > 0:
-        raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
+    run = run or RunOptions()
+    _check_settings(n_pilot, quantile, n_main, n_desired)
     info = check_simulator(simulator)
     data = prepare_observed_for(info, observed, outputs)
     full_prior = with_noise(prior, noise, data.names)
@@ -393,7 +376,7 @@ def abc_rejection(
     if sensor_noise is not None:
         full_prior = extended_prior(full_prior, sensor_noise.prior_bounds(data))
     model_names = _model_names(info, full_prior)
-    entropy, spawn_key = split_seed(seed)
+    entropy, spawn_key = split_seed(run.seed)
     settings = {
         "sampler": "abc_rejection",
         "n_pilot": int(n_pilot),
@@ -411,10 +394,12 @@ def abc_rejection(
         "observed_digest": array_digest(data.values),
         "simulator": describe_callable(simulator),
         "distance": describe_callable(distance),
-        "time_limit": time_limit,
+        "time_limit": run.time_limit,
         "spawn_key": list(spawn_key),
     }
-    store = SimulationStore(checkpoint, settings, entropy) if checkpoint is not None else None
+    store = (
+        SimulationStore(run.checkpoint, settings, entropy) if run.checkpoint is not None else None
+    )
     try:
         if store is not None:
             entropy = store.entropy
@@ -450,14 +435,11 @@ def abc_rejection(
             ),
             entropy=entropy,
             spawn_key=spawn_key,
-            time_limit=time_limit,
+            time_limit=run.time_limit,
         )
-        with (
-            executor_scope(executor, n_workers) as pool,
-            PhaseProgress(progress_enabled(progress)) as bar,
-        ):
+        with run.open_executor() as pool, PhaseProgress(progress_enabled(run.progress)) as bar:
             _run_phase(
-                pool, task, PILOT, thetas[PILOT], records[PILOT], store, bar, max_failure_rate
+                pool, task, PILOT, thetas[PILOT], records[PILOT], store, bar, run.max_failure_rate
             )
             pilot_ok = records[PILOT].status == OK
             if not pilot_ok.any():
@@ -467,7 +449,15 @@ def abc_rejection(
             epsilon = float(np.quantile(records[PILOT].distance[pilot_ok], quantile))
             scan = AcceptanceScan(records[MAIN], epsilon, n_desired)
             _run_phase(
-                pool, task, MAIN, thetas[MAIN], records[MAIN], store, bar, max_failure_rate, scan
+                pool,
+                task,
+                MAIN,
+                thetas[MAIN],
+                records[MAIN],
+                store,
+                bar,
+                run.max_failure_rate,
+                scan,
             )
     finally:
         if store is not None:

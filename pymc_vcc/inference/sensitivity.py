@@ -17,14 +17,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import xarray as xr
 from SALib.analyze import sobol as sobol_analyze
 from SALib.sample import sobol as sobol_sample
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind, WorkerCrash, executor_scope
+from pymc_vcc.execution.executors import Executor, WorkerCrash
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.outcomes import crash_outcome
 from pymc_vcc.execution.store import ResultRecord, ResultStore
 from pymc_vcc.inference.priors import check_prior_support, validate_bounds
@@ -105,6 +105,15 @@ def _run_rows(
     return [records[index] for index in range(len(rows))]
 
 
+def _integer_seed(seed: int | np.random.SeedSequence | None) -> int | None:
+    """The integer a Sobol run is seeded with (one drawn from a SeedSequence); None stays."""
+    if isinstance(seed, np.random.SeedSequence):
+        return int(seed.generate_state(1)[0])
+    if seed is not None and (isinstance(seed, bool) or int(seed) != seed or seed < 0):
+        raise ValueError(f"seed must be a non-negative integer or a SeedSequence, got {seed!r}")
+    return seed
+
+
 def sobol_indices(
     simulator: Simulator,
     bounds: Mapping[str, tuple[float, float]],
@@ -112,11 +121,8 @@ def sobol_indices(
     *,
     n_base: int = 1024,
     window: tuple[float, float] | None = (20.0, 1060.0),
-    executor: Executor | ExecutorKind = "processes",
-    seed: int = 0,
     n_resamples: int = 100,
-    checkpoint: str | Path | None = None,
-    time_limit: float | None = None,
+    run: RunOptions | None = None,
 ) -> xr.Dataset:
     """First- and total-order Sobol indices of each output's time average.
 
@@ -127,17 +133,17 @@ def sobol_indices(
         outputs: names of the outputs analysed.
         n_base: Saltelli base samples N (a power of 2); ``N · (D + 2)`` simulations run.
         window: time window of the average, s (None: the whole run).
-        executor: where simulations run (an executor, or a kind to create one).
-        seed: seeds the scrambled Sobol sequence and the simulations' random streams.
         n_resamples: bootstrap resamples of SALib's confidence intervals.
-        checkpoint: SQLite file persisting finished simulations; a run started again with the
-            same arguments resumes there and recomputes nothing finished.
-        time_limit: wall-time limit of one simulation, s; slower runs count as failed.
+        run: where and how the simulations run (no progress bar); its ``seed`` seeds the
+            scrambled Sobol sequence and the simulations' random streams, and its
+            ``checkpoint`` is an SQLite file persisting finished simulations (a run started
+            again with the same arguments resumes there and recomputes nothing finished).
 
     Returns:
         Dataset with ``S1``, ``ST`` and their 95 % half-widths ``S1_conf``, ``ST_conf`` over
         (parameter, output); attrs count simulations, failures and dropped base samples.
     """
+    run = run or RunOptions()
     checked = validate_bounds(bounds)
     check_prior_support(check_simulator(simulator).support, checked)
     names = tuple(checked)
@@ -148,15 +154,11 @@ def sobol_indices(
         raise ValueError(f"n_base must be at least 2, got {n_base}")
     if window is not None and not window[0] < window[1]:
         raise ValueError(f"window must be (start, end) with start < end, got {window}")
-    if time_limit is not None and not time_limit > 0:
-        raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
     problem = {
         "num_vars": len(names),
         "names": list(names),
         "bounds": [list(checked[name]) for name in names],
     }
-    rows = sobol_sample.sample(problem, n_base, calc_second_order=False, seed=seed)
-    task = _SobolTask(WindowMean(simulator, outputs, window), names, seed, time_limit)
     settings = {
         "sampler": "sobol_indices",
         "problem": problem,
@@ -164,11 +166,18 @@ def sobol_indices(
         "n_base": int(n_base),
         "window": None if window is None else list(map(float, window)),
         "simulator": f"{type(simulator).__module__}.{type(simulator).__qualname__}",
-        "time_limit": time_limit,
+        "time_limit": run.time_limit,
     }
-    store = ResultStore(checkpoint, settings, seed) if checkpoint is not None else None
+    seed = _integer_seed(run.seed)
+    store = ResultStore(run.checkpoint, settings, seed) if run.checkpoint is not None else None
+    if store is not None:
+        seed = store.entropy
+    elif seed is None:
+        seed = int(np.random.SeedSequence().entropy)
+    rows = sobol_sample.sample(problem, n_base, calc_second_order=False, seed=seed)
+    task = _SobolTask(WindowMean(simulator, outputs, window), names, seed, run.time_limit)
     try:
-        with executor_scope(executor) as runner:
+        with run.open_executor() as runner:
             results = _run_rows(runner, task, rows, store)
     finally:
         if store is not None:

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind, executor_scope
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.distances import BatchDistance, ks_distances
 from pymc_vcc.inference.noise import SensorNoise, extended_prior, model_drift, with_noise
 from pymc_vcc.inference.priors import GMMPrior, Prior, prior_from_dataset
@@ -122,13 +122,7 @@ def sequential_calibration(
     sensor_noise: SensorNoise | None = None,
     outputs: Sequence[str] | None = None,
     distance: BatchDistance = ks_distances,
-    executor: Executor | ExecutorKind = "processes",
-    n_workers: int | None = None,
-    checkpoint: str | Path | None = None,
-    seed: int | np.random.SeedSequence | None = None,
-    time_limit: float | None = None,
-    max_failure_rate: float = 0.5,
-    progress: bool | None = None,
+    run: RunOptions | None = None,
 ) -> SequentialResult:
     """Calibrate on datasets in order, passing each posterior on as the next prior.
 
@@ -142,15 +136,14 @@ def sequential_calibration(
         drift: how far each of ``first_prior``'s parameters may move between datasets, the sd
             of a normal step in fractions of its range, allowed by each fitted prior
             (:meth:`~pymc_vcc.inference.priors.GMMPrior.fit`; 0: the posterior as it is).
-        checkpoint: folder for one checkpoint per dataset (``dataset_k.sqlite``); a restarted
-            run resumes where it stopped.
-        seed: the stages use its children ``SeedSequence.spawn`` style, one per dataset.
         n_pilot, quantile, n_main, n_desired: the rejection sampler's budget per dataset (the
             paper's Table I: 5000 pilot draws, the 5 % quantile, 80000 main draws, 4000
             accepted).
         noise, sensor_noise, outputs, distance: how simulations are compared with the data.
-        executor, n_workers, time_limit, max_failure_rate, progress: where and how the
-            simulations run (``time_limit`` in s per simulation).
+        run: where and how the simulations run, as for ``abc_rejection``; its ``checkpoint``
+            is a folder holding one checkpoint per dataset (``dataset_k.sqlite``: a restarted
+            run resumes where it stopped), and the stages use its ``seed``'s children
+            (``SeedSequence.spawn`` style, one per dataset).
 
     The arguments after ``drift`` are those of
     :func:`~pymc_vcc.inference.rejection.abc_rejection`, applied to each dataset.
@@ -163,12 +156,13 @@ def sequential_calibration(
             f"got {len(simulators)} simulators for {len(datasets)} datasets; give one simulator, "
             "or one per dataset"
         )
-    folder = Path(checkpoint) if checkpoint is not None else None
-    root = _root_seed(seed, folder)
+    run = run or RunOptions()
+    folder = Path(run.checkpoint) if run.checkpoint is not None else None
+    root = _root_seed(run.seed, folder)
     stage_seeds = root.spawn(len(datasets))
     trees: list[xr.DataTree] = []
     priors: list[Prior] = []
-    with executor_scope(executor, n_workers) as pool:
+    with run.open_executor() as pool:
         for k, (stage_simulator, observed) in enumerate(zip(simulators, datasets, strict=True)):
             if k == 0 or keep_uniform:
                 simulated = check_simulator(stage_simulator).output_names
@@ -198,12 +192,12 @@ def sequential_calibration(
                     sensor_noise=sensor_noise,
                     outputs=outputs,
                     distance=distance,
-                    executor=pool,
-                    checkpoint=folder / f"{_stage_name(k)}.sqlite" if folder else None,
-                    seed=stage_seeds[k],
-                    time_limit=time_limit,
-                    max_failure_rate=max_failure_rate,
-                    progress=progress,
+                    run=replace(
+                        run,
+                        executor=pool,
+                        checkpoint=folder / f"{_stage_name(k)}.sqlite" if folder else None,
+                        seed=stage_seeds[k],
+                    ),
                 )
             )
     return SequentialResult(trees, priors)

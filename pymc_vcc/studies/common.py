@@ -19,13 +19,8 @@ from typing import Any, TypeVar
 import numpy as np
 import xarray as xr
 
-from pymc_vcc.execution.executors import (
-    EXECUTOR_KINDS,
-    Executor,
-    check_n_workers,
-    check_scheduler,
-    make_executor,
-)
+from pymc_vcc.execution.executors import Executor, ExecutorKind, check_scheduler, make_executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.output_folder import OutputFolderError, atomic_path, claim_output_folder
 from pymc_vcc.inference.distances import BatchDistance
 from pymc_vcc.inference.noise import SensorNoise
@@ -119,7 +114,7 @@ class StudySettings:
     """
 
     budget: str | Budget = "small"
-    executor: str = "processes"
+    executor: ExecutorKind = "processes"
     scheduler: str | None = None
     n_workers: int | None = None
     out: Path | None = None
@@ -131,17 +126,11 @@ class StudySettings:
 
     def __post_init__(self) -> None:
         get_budget(self.budget)
-        check_n_workers(self.n_workers)
-        if self.time_limit is not None and not self.time_limit > 0:
-            raise ValueError(
-                f"time_limit must be a positive number of seconds, got {self.time_limit!r}"
-            )
+        RunOptions(  # refuses what a run would: the executor kind, workers, time limit
+            executor=self.executor, n_workers=self.n_workers, time_limit=self.time_limit
+        )
         if self.solver is not None:
             get_solver(self.solver)
-        if self.executor not in EXECUTOR_KINDS:
-            raise ValueError(
-                f"executor must be one of {list(EXECUTOR_KINDS)}, got {self.executor!r}"
-            )
         if self.scheduler is not None and self.executor != "dask":
             raise ValueError("scheduler is the address of a Dask scheduler: use executor='dask'")
         if self.scheduler is not None:
@@ -155,16 +144,33 @@ class StudySettings:
         return get_budget(self.budget)
 
     def rejection_options(self) -> dict[str, Any]:
-        """Keyword arguments of the rejection samplers: the budget's Table I settings, progress."""
+        """Keyword arguments of the rejection samplers: the budget's Table I settings."""
         work = self.work
         return {
             "n_pilot": work.n_pilot,
             "quantile": work.quantile,
             "n_main": work.n_main,
             "n_desired": work.n_desired,
-            "progress": self.progress,
-            "time_limit": self.time_limit,
         }
+
+    def run_options(
+        self,
+        executor: Executor,
+        *,
+        seed: int | np.random.SeedSequence,
+        checkpoint: Path | None = None,
+    ) -> RunOptions:
+        """How one of the study's runs executes: on ``executor`` (from :meth:`open_executor`),
+        with this study's progress bars and time limit, from ``seed`` (this study's
+        :attr:`seed` or one derived from it: no run of a study draws fresh entropy), persisted
+        at ``checkpoint`` (from :meth:`checkpoint` or :meth:`checkpoint_folder`)."""
+        return RunOptions(
+            executor=executor,
+            checkpoint=checkpoint,
+            seed=seed,
+            time_limit=self.time_limit,
+            progress=self.progress,
+        )
 
     @contextmanager
     def claim_output(self, study: str) -> Iterator[None]:

@@ -309,10 +309,12 @@ def smc_sequential_calibration(
             reference = None
             if likelihood and fit_starts:
                 reference = fit_reference(
-                    executor=executor,
                     starts=fit_starts,
-                    seed=sampler_seed,
-                    checkpoint=settings.checkpoint(f"estimate_fit_{k}", ".json"),
+                    run=settings.run_options(
+                        executor,
+                        seed=sampler_seed,
+                        checkpoint=settings.checkpoint(f"estimate_fit_{k}", ".json"),
+                    ),
                 )
             tree = sample_smc_abc(
                 draws,
@@ -338,11 +340,14 @@ def smc_sequential_calibration(
                 rounds=ROUNDS,
                 accept=REFINE_ACCEPT,
                 sensor_noise=sensor_noise,
-                executor=executor,
-                checkpoint=settings.checkpoint_folder(f"estimate_regression_{k}"),
-                seed=stage_seed.spawn(1)[0],
-                time_limit=settings.time_limit,
-                progress=bool(settings.progress),
+                run=replace(
+                    settings.run_options(
+                        executor,
+                        seed=stage_seed.spawn(1)[0],
+                        checkpoint=settings.checkpoint_folder(f"estimate_regression_{k}"),
+                    ),
+                    progress=bool(settings.progress),
+                ),
             )
             tree["smc_posterior"] = tree["posterior"]
             tree["posterior"] = refined["posterior"]
@@ -481,8 +486,7 @@ def estimation_study(
             ),
             sensor_noise or SensorNoise.typical(),
             at=truths[0],
-            executor=executor,
-            time_limit=settings.time_limit,
+            run=settings.run_options(executor, seed=settings.seed),
         )
         if method != "rejection":
             calibration = smc_sequential_calibration(
@@ -511,10 +515,10 @@ def estimation_study(
                 noise=noise,
                 sensor_noise=sensor_noise,
                 distance=BATCH_DISTANCES[distance],
-                executor=executor,
-                checkpoint=settings.checkpoint_folder("estimate"),
-                seed=sampler_seed,
                 drift=drift,
+                run=settings.run_options(
+                    executor, seed=sampler_seed, checkpoint=settings.checkpoint_folder("estimate")
+                ),
                 **settings.rejection_options(),
             )
         predictive = [
@@ -524,9 +528,7 @@ def estimation_study(
                 reference=reference,
                 max_draws=settings.work.predictive_draws,
                 noise=False,
-                executor=executor,
-                seed=seed,
-                time_limit_s=settings.time_limit,
+                run=settings.run_options(executor, seed=seed),
             )
             for tree, reference, seed in zip(
                 calibration.trees, references, predictive_seed.spawn(2), strict=True

@@ -116,8 +116,7 @@ def identify_study(
             at=point,
             prior_sd=known,
             step=step,
-            executor=executor,
-            time_limit=settings.time_limit,
+            run=settings.run_options(executor, seed=settings.seed),
         )
     result = IdentifyResult(found, float(t_end), time.perf_counter() - started, tuple(fit))
     if settings.out is not None:

@@ -165,11 +165,11 @@ def calibrate_charge(
             simulator,
             prior,
             observed,
-            executor=executor,
-            checkpoint=settings.checkpoint(checkpoint_name),
-            seed=seed,
             sensor_noise=sensor_noise,
             distance=distance,
+            run=settings.run_options(
+                executor, seed=seed, checkpoint=settings.checkpoint(checkpoint_name)
+            ),
             **settings.rejection_options(),
         )
         return tree, int(tree["sample_stats"]["n_simulations"])
@@ -216,11 +216,7 @@ def shared_table(
         template,
         n_pilot=work.n_pilot,
         n_main=work.n_main,
-        executor=executor,
-        checkpoint=settings.checkpoint_folder(name),
-        seed=seed,
-        time_limit=settings.time_limit,
-        progress=settings.progress,
+        run=settings.run_options(executor, seed=seed, checkpoint=settings.checkpoint_folder(name)),
     )
 
 

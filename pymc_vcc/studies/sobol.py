@@ -85,10 +85,9 @@ def sobol_study(
             unit.cycle_model.output_ids,
             n_base=settings.work.sobol_base,
             window=window,
-            executor=executor,
-            seed=settings.seed,
-            checkpoint=settings.checkpoint("sobol"),
-            time_limit=settings.time_limit,
+            run=settings.run_options(
+                executor, seed=settings.seed, checkpoint=settings.checkpoint("sobol")
+            ),
         )
     result = SobolResult(indices, time.perf_counter() - started)
     if settings.out is not None:

@@ -8,7 +8,7 @@ import sys
 import textwrap
 import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -16,6 +16,7 @@ import pytest
 import xarray as xr
 
 from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.store import CheckpointDamagedError, CheckpointMismatchError
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.rejection import abc_rejection
@@ -23,7 +24,8 @@ from pymc_vcc.testing import GaussianLocation, Recording
 
 MODEL = GaussianLocation(n_time=20, low=-1.0, high=1.0)
 OBSERVED = MODEL({"mu": 0.2}, np.random.default_rng(0))
-SETTINGS = dict(n_pilot=150, quantile=0.1, n_main=1500, n_desired=60, seed=21)
+SETTINGS = dict(n_pilot=150, quantile=0.1, n_main=1500, n_desired=60)
+SERIAL = RunOptions(executor="serial", seed=21)
 
 RUN_SCRIPT = textwrap.dedent(
     """
@@ -31,6 +33,7 @@ RUN_SCRIPT = textwrap.dedent(
 
     import numpy as np
 
+    from pymc_vcc.execution.options import RunOptions
     from pymc_vcc.inference.rejection import abc_rejection
     from pymc_vcc.inference.priors import UniformPrior
     from pymc_vcc.testing import GaussianLocation, Recording, Slow
@@ -43,10 +46,9 @@ RUN_SCRIPT = textwrap.dedent(
             Recording(Slow(model, 0.004, busy=False), log),
             UniformPrior(model.bounds),
             observed,
-            n_pilot=150, quantile=0.1, n_main=1500, n_desired=60, seed=21,
+            n_pilot=150, quantile=0.1, n_main=1500, n_desired=60,
             distance=model.distance,
-            executor="serial",
-            checkpoint=checkpoint,
+            run=RunOptions(executor="serial", seed=21, checkpoint=checkpoint),
         )
         tree.to_netcdf(out, engine="h5netcdf")
 
@@ -63,7 +65,7 @@ def _reference():
         UniformPrior(MODEL.bounds),
         OBSERVED,
         distance=MODEL.distance,
-        executor="serial",
+        run=SERIAL,
         **SETTINGS,
     )
 
@@ -153,13 +155,13 @@ class InterruptAfter:
 
 def test_an_interrupted_run_resumes_on_another_executor_with_the_same_result(tmp_path):
     checkpoint = tmp_path / "run.sqlite"
-    common = dict(distance=MODEL.distance, checkpoint=checkpoint, **SETTINGS)
+    common = dict(distance=MODEL.distance, **SETTINGS)
     with pytest.raises(KeyboardInterrupt):
         abc_rejection(
             InterruptAfter(MODEL, 400),
             UniformPrior(MODEL.bounds),
             OBSERVED,
-            executor="serial",
+            run=replace(SERIAL, checkpoint=checkpoint),
             **common,
         )
     assert 150 < len(_persisted(checkpoint)) <= 400
@@ -168,7 +170,7 @@ def test_an_interrupted_run_resumes_on_another_executor_with_the_same_result(tmp
             InterruptAfter(MODEL, None),
             UniformPrior(MODEL.bounds),
             OBSERVED,
-            executor=pool,
+            run=replace(SERIAL, executor=pool, checkpoint=checkpoint),
             **common,
         )
     _assert_same_result(resumed, _reference())
@@ -179,9 +181,8 @@ def test_a_finished_checkpoint_reruns_nothing_and_a_seedless_one_keeps_its_seed(
     simulator = Recording(MODEL, str(log))
     arguments = dict(
         distance=MODEL.distance,
-        executor="serial",
-        checkpoint=tmp_path / "run.sqlite",
-        **(SETTINGS | {"seed": None}),
+        run=replace(SERIAL, seed=None, checkpoint=tmp_path / "run.sqlite"),
+        **SETTINGS,
     )
     first = abc_rejection(simulator, UniformPrior(MODEL.bounds), OBSERVED, **arguments)
     calls = len(_logged(log))
@@ -192,7 +193,8 @@ def test_a_finished_checkpoint_reruns_nothing_and_a_seedless_one_keeps_its_seed(
 
 
 def test_a_checkpoint_refuses_a_run_with_other_arguments(tmp_path):
-    arguments = dict(distance=MODEL.distance, executor="serial", checkpoint=tmp_path / "c.sqlite")
+    run = replace(SERIAL, checkpoint=tmp_path / "c.sqlite")
+    arguments = dict(distance=MODEL.distance, run=run)
     abc_rejection(MODEL, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **SETTINGS)
     with pytest.raises(CheckpointMismatchError, match=r"differing: \['quantile'\]"):
         abc_rejection(
@@ -204,7 +206,12 @@ def test_a_checkpoint_refuses_a_run_with_other_arguments(tmp_path):
         )
     with pytest.raises(CheckpointMismatchError, match=r"differing: \['seed'\]"):
         abc_rejection(
-            MODEL, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **(SETTINGS | {"seed": 5})
+            MODEL,
+            UniformPrior(MODEL.bounds),
+            OBSERVED,
+            distance=MODEL.distance,
+            run=replace(run, seed=5),
+            **SETTINGS,
         )
     with pytest.raises(CheckpointMismatchError, match="observed_digest"):
         abc_rejection(MODEL, UniformPrior(MODEL.bounds), OBSERVED + 1.0, **arguments, **SETTINGS)
@@ -222,7 +229,7 @@ class SolvedLocation(GaussianLocation):
 
 
 def test_a_checkpoint_refuses_to_resume_with_another_solver(tmp_path):
-    arguments = dict(distance=MODEL.distance, executor="serial", checkpoint=tmp_path / "c.sqlite")
+    arguments = dict(distance=MODEL.distance, run=replace(SERIAL, checkpoint=tmp_path / "c.sqlite"))
     radau, cvode = SolvedLocation(), SolvedLocation(solver="cvode")
     abc_rejection(radau, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **SETTINGS)
     with pytest.raises(CheckpointMismatchError, match=r"differing: \['simulator'\]"):
@@ -232,14 +239,14 @@ def test_a_checkpoint_refuses_to_resume_with_another_solver(tmp_path):
 def test_a_damaged_checkpoint_is_refused_naming_the_file(tmp_path):
     checkpoint = tmp_path / "run.sqlite"
     checkpoint.write_bytes(b"this is not a database, it was overwritten" * 100)
-    arguments = dict(distance=MODEL.distance, executor="serial", checkpoint=checkpoint)
+    arguments = dict(distance=MODEL.distance, run=replace(SERIAL, checkpoint=checkpoint))
     with pytest.raises(CheckpointDamagedError, match=rf"checkpoint {checkpoint} is damaged"):
         abc_rejection(MODEL, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **SETTINGS)
 
 
 def test_an_altered_row_is_refused_rather_than_change_the_posterior(tmp_path):
     checkpoint = tmp_path / "run.sqlite"
-    arguments = dict(distance=MODEL.distance, executor="serial", checkpoint=checkpoint)
+    arguments = dict(distance=MODEL.distance, run=replace(SERIAL, checkpoint=checkpoint))
     abc_rejection(MODEL, UniformPrior(MODEL.bounds), OBSERVED, **arguments, **SETTINGS)
     connection = sqlite3.connect(checkpoint)
     with connection:

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from pymc_vcc.execution.executors import EXECUTOR_KINDS, DaskExecutor, make_executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.testing import Flaky, GaussianLocation
@@ -190,10 +191,14 @@ def test_dask_cluster_started_from_the_command_line_gives_the_serial_results(tmp
         # a calibration through the cluster equals the serial one, failures and all
         model = Flaky(GaussianLocation(n_time=30), rate=0.1)
         observed = GaussianLocation(n_time=30)({"mu": 0.2}, np.random.default_rng(1))
-        settings = dict(n_pilot=300, quantile=0.1, n_main=2000, n_desired=80, seed=3)
+        settings = dict(n_pilot=300, quantile=0.1, n_main=2000, n_desired=80)
         prior = UniformPrior(model.base.bounds)
-        on_dask = abc_rejection(model, prior, observed, executor=executor, **settings)
-    serial = abc_rejection(model, prior, observed, executor="serial", **settings)
+        on_dask = abc_rejection(
+            model, prior, observed, run=RunOptions(executor=executor, seed=3), **settings
+        )
+    serial = abc_rejection(
+        model, prior, observed, run=RunOptions(executor="serial", seed=3), **settings
+    )
     assert on_dask.posterior.sizes["draw"] == 80
     for group, variable in [("posterior", "mu"), ("sample_stats", "sim_distance")]:
         np.testing.assert_array_equal(on_dask[group][variable], serial[group][variable])

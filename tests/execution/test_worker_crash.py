@@ -19,6 +19,7 @@ import pytest
 import xarray as xr
 
 from pymc_vcc.execution.executors import WorkerCrash, make_executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.predictive import simulate_predictive
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.pymc.model import add_simulator
@@ -167,15 +168,19 @@ def test_a_crash_leaves_the_other_chunks_alone(pool, tmp_path):
 
 
 def test_abc_counts_crashes_as_failures_and_matches_the_serial_run(pool, tmp_path):
-    settings = dict(
-        n_pilot=120, quantile=0.2, n_main=300, n_desired=300, distance=BASE.distance, seed=4
-    )
+    settings = dict(n_pilot=120, quantile=0.2, n_main=300, n_desired=300, distance=BASE.distance)
     prior = UniformPrior(BASE.bounds)
     checkpoint = tmp_path / "run.sqlite"
     crashed = abc_rejection(
-        CRASHING, prior, OBSERVED, executor=pool, checkpoint=checkpoint, **settings
+        CRASHING,
+        prior,
+        OBSERVED,
+        run=RunOptions(executor=pool, checkpoint=checkpoint, seed=4),
+        **settings,
     )
-    serial = abc_rejection(CRASHING.raising(), prior, OBSERVED, executor="serial", **settings)
+    serial = abc_rejection(
+        CRASHING.raising(), prior, OBSERVED, run=RunOptions(executor="serial", seed=4), **settings
+    )
 
     stats = crashed.sample_stats
     status = stats["sim_status"].values
@@ -199,7 +204,11 @@ def test_abc_counts_crashes_as_failures_and_matches_the_serial_run(pool, tmp_pat
     # crashes are checkpointed: a resumed run simulates nothing again (serially, the doomed
     # draws would now raise rather than crash)
     resumed = abc_rejection(
-        CRASHING.raising(), prior, OBSERVED, executor="serial", checkpoint=checkpoint, **settings
+        CRASHING.raising(),
+        prior,
+        OBSERVED,
+        run=RunOptions(executor="serial", checkpoint=checkpoint, seed=4),
+        **settings,
     )
     np.testing.assert_array_equal(resumed.sample_stats["sim_status"], status)
 
@@ -215,12 +224,12 @@ def test_an_item_over_its_time_limit_is_stopped_and_its_worker_replaced(pool):
 
 def test_abc_counts_runs_stopped_for_their_time_limit(pool):
     hanging = Crashing(BASE, ((2.0, 2.1, "hang"),))
-    settings = dict(n_pilot=60, quantile=0.2, n_main=60, n_desired=60, seed=4, time_limit=0.5)
+    settings = dict(n_pilot=60, quantile=0.2, n_main=60, n_desired=60)
     tree = abc_rejection(
         hanging,
         UniformPrior(BASE.bounds),
         OBSERVED,
-        executor=pool,
+        run=RunOptions(executor=pool, seed=4, time_limit=0.5),
         distance=BASE.distance,
         **settings,
     )
@@ -234,18 +243,22 @@ def test_predictive_and_sensitivity_count_crashed_runs(pool):
     mu = np.linspace(-1.0, 1.0, 40).reshape(2, 20)
     mu[0, 3], mu[1, 7], mu[1, 8] = 2.04, -2.42, -2.42
     posterior = xr.DataTree.from_dict({"posterior": xr.Dataset({"mu": (("chain", "draw"), mu)})})
-    tree = simulate_predictive(posterior, CRASHING, executor=pool, seed=1)
+    tree = simulate_predictive(posterior, CRASHING, run=RunOptions(executor=pool, seed=1))
     predictive = tree["posterior_predictive"]
     assert predictive.attrs["n_failed"] == 3
     assert predictive.attrs["failure_kinds"] == "worker-crash: 3"
     failed = np.isnan(tree["posterior_predictive"]["y"]).all("time")
     np.testing.assert_array_equal(failed, CRASHING.doomed(mu))
 
-    settings = dict(n_base=16, window=None, seed=2, n_resamples=10)
+    settings = dict(n_base=16, window=None, n_resamples=10)
     bounds = {"mu": (-3.0, 3.0)}
     crashing = Crashing(BASE, ((1.1, 1.15, "segfault"), (-2.05, -2.0, "exit")))
-    crashed = sobol_indices(crashing, bounds, ["y"], executor=pool, **settings)
-    serial = sobol_indices(crashing.raising(), bounds, ["y"], executor="serial", **settings)
+    crashed = sobol_indices(
+        crashing, bounds, ["y"], run=RunOptions(executor=pool, seed=2), **settings
+    )
+    serial = sobol_indices(
+        crashing.raising(), bounds, ["y"], run=RunOptions(executor="serial", seed=2), **settings
+    )
     assert crashed.attrs["n_failed"] == serial.attrs["n_failed"] == 2
     assert "worker-crash: worker process died" in crashed.attrs["failure_reasons"]
     xr.testing.assert_equal(crashed.drop_attrs(), serial.drop_attrs())

@@ -8,12 +8,15 @@ deterministic). The distance of the target from the exact posterior is computed,
 and bounded separately, so each test also bounds the sampler's error against the exact posterior.
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import xarray as xr
 from scipy import stats
 
 from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.priors import GMMPrior, UniformPrior
 from pymc_vcc.inference.rejection import (
     SimulationTask,
@@ -42,8 +45,7 @@ def test_gaussian_location_posterior_matches_the_exact_posterior():
         n_main=30_000,
         n_desired=30_000,
         distance=model.distance,
-        executor="serial",
-        seed=1,
+        run=RunOptions(executor="serial", seed=1),
     )
     sample = tree.posterior["mu"].values.ravel()
     epsilon = float(tree.sample_stats["epsilon"])
@@ -68,8 +70,7 @@ def test_linear_gaussian_posterior_matches_the_exact_correlated_target():
         n_main=30_000,
         n_desired=30_000,
         distance=model.distance,
-        executor="serial",
-        seed=3,
+        run=RunOptions(executor="serial", seed=3),
     )
     sample = np.column_stack([tree.posterior[name].values.ravel() for name in ("a", "b")])
     epsilon = float(tree.sample_stats["epsilon"])
@@ -102,8 +103,7 @@ def test_ks_distance_posterior_matches_its_exact_target_and_tightens_with_the_qu
             quantile=quantile,
             n_main=n_main,
             n_desired=n_main,
-            executor="serial",
-            seed=4,
+            run=RunOptions(executor="serial", seed=4),
         )
         sample = tree.posterior["mu"].values.ravel()
         epsilon = float(tree.sample_stats["epsilon"])
@@ -133,8 +133,7 @@ def test_simulation_based_calibration_finds_no_bias():
             n_main=1000,
             n_desired=1000,
             distance=model.distance,
-            executor="serial",
-            seed=replication,
+            run=RunOptions(executor="serial", seed=replication),
         )
         ranks.append((tree.posterior["mu"].values < truth).mean())
     ranks = np.array(ranks)
@@ -157,9 +156,7 @@ def test_failures_are_excluded_counted_and_explained():
         n_main=600,
         n_desired=600,
         distance=model.distance,
-        executor="serial",
-        seed=7,
-        time_limit=0.05,
+        run=RunOptions(executor="serial", seed=7, time_limit=0.05),
     )
     stats_ = tree.sample_stats
     status = stats_["sim_status"].values
@@ -184,8 +181,7 @@ def test_a_run_where_most_simulations_fail_stops_with_a_clear_message():
             n_pilot=500,
             n_main=500,
             n_desired=10,
-            executor="serial",
-            seed=0,
+            run=RunOptions(executor="serial", seed=0),
         )
 
 
@@ -200,8 +196,7 @@ def test_main_phase_stops_at_n_desired_accepting_the_first_draws_in_order():
         n_main=5000,
         n_desired=40,
         distance=model.distance,
-        executor="serial",
-        seed=9,
+        run=RunOptions(executor="serial", seed=9),
     )
     stats_ = tree.sample_stats
     main = stats_["sim_phase"].values == "main"
@@ -219,11 +214,14 @@ def test_main_phase_stops_at_n_desired_accepting_the_first_draws_in_order():
 def test_same_seed_same_result_on_serial_and_processes_and_different_seeds_differ():
     model = Flaky(GaussianLocation(n_time=30), rate=0.1)
     observed = GaussianLocation(n_time=30)({"mu": 0.2}, np.random.default_rng(10))
-    settings = dict(n_pilot=300, quantile=0.1, n_main=1500, n_desired=100, seed=11)
+    settings = dict(n_pilot=300, quantile=0.1, n_main=1500, n_desired=100)
     prior = UniformPrior(model.base.bounds)
-    serial = abc_rejection(model, prior, observed, executor="serial", **settings)
+    run = RunOptions(executor="serial", seed=11)
+    serial = abc_rejection(model, prior, observed, run=run, **settings)
     with make_executor("processes", n_workers=2) as pool:
-        parallel = abc_rejection(model, prior, observed, executor=pool, **settings)
+        parallel = abc_rejection(
+            model, prior, observed, run=replace(run, executor=pool), **settings
+        )
     for group, variable in [
         ("posterior", "mu"),
         ("prior", "mu"),
@@ -231,7 +229,7 @@ def test_same_seed_same_result_on_serial_and_processes_and_different_seeds_diffe
         ("sample_stats", "sim_status"),
     ]:
         np.testing.assert_array_equal(serial[group][variable], parallel[group][variable])
-    other = abc_rejection(model, prior, observed, executor="serial", **(settings | {"seed": 12}))
+    other = abc_rejection(model, prior, observed, run=replace(run, seed=12), **settings)
     assert not np.array_equal(other.prior["mu"].values, serial.prior["mu"].values)
 
 
@@ -247,8 +245,7 @@ def test_noise_scales_are_parameters_and_perturb_outputs_as_in_algorithm_1():
         quantile=0.2,
         n_main=300,
         n_desired=300,
-        executor="serial",
-        seed=13,
+        run=RunOptions(executor="serial", seed=13),
     )
     assert list(tree.posterior.data_vars) == ["mu", "nu_y"]
     nu = tree.prior["nu_y"].values
@@ -277,8 +274,7 @@ def test_result_tree_has_the_arviz_groups_and_round_trips_through_netcdf(tmp_pat
         n_main=400,
         n_desired=20,
         quantile=0.1,
-        executor="serial",
-        seed=14,
+        run=RunOptions(executor="serial", seed=14),
     )
     assert {"posterior", "prior", "observed_data", "sample_stats"} <= set(tree.children)
     assert tree.posterior.sizes == {"chain": 1, "draw": 20}
@@ -313,9 +309,7 @@ _never_called.output_names = ("y",)
         ({"prior": UniformPrior({"sigma": (0, 1)})}, r"disagree on parameter names"),
         ({"noise": {"TD": (0, 0.1)}}, r"noise names unknown outputs \['TD'\]"),
         ({"noise": {"y": (-0.1, 0.1)}}, "0 <= low < high"),
-        ({"seed": -3}, "seed must be a non-negative integer"),
-        ({"time_limit": 0.0}, "time_limit must be a positive"),
-        ({"max_failure_rate": 0.0}, r"max_failure_rate must lie in \(0, 1\]"),
+        ({"run": RunOptions(executor="serial", seed=-3)}, "seed must be a non-negative integer"),
     ],
 )
 def test_bad_input_is_a_clear_error_before_any_simulation(change, message):
@@ -326,7 +320,7 @@ def test_bad_input_is_a_clear_error_before_any_simulation(change, message):
         "n_pilot": 10,
         "n_main": 100,
         "n_desired": 10,
-        "executor": "serial",
+        "run": RunOptions(executor="serial"),
     } | change
     with pytest.raises(ValueError, match=message):
         abc_rejection(**arguments)
@@ -338,7 +332,7 @@ def test_a_prior_fitted_with_noise_scales_is_used_as_is_and_must_match_their_bou
     sample = np.column_stack([rng.uniform(-0.5, 0.5, 200), rng.uniform(0.01, 0.09, 200)])
     fitted = GMMPrior.fit(sample, bounds, max_components=1, seed=0)
     model = GaussianLocation(n_time=5)
-    common = dict(n_pilot=50, n_main=100, n_desired=5, executor="serial", seed=0)
+    common = dict(n_pilot=50, n_main=100, n_desired=5, run=RunOptions(executor="serial", seed=0))
     tree = abc_rejection(model, fitted, np.zeros((1, 5)), noise={"y": (0.0, 0.1)}, **common)
     assert set(tree.posterior.data_vars) == {"mu", "nu_y"}
     with pytest.raises(ValueError, match=r"prior bounds \(0.0, 0.1\) of 'nu_y' differ"):
@@ -355,13 +349,18 @@ def test_a_prior_fitted_with_noise_scales_is_used_as_is_and_must_match_their_bou
 
 def test_progress_bar_shows_done_accepted_and_failed_when_asked(capsys):
     model = GaussianLocation(n_time=10)
-    arguments = dict(
-        n_pilot=100, quantile=0.2, n_main=300, n_desired=300, executor="serial", seed=16
+    arguments = dict(n_pilot=100, quantile=0.2, n_main=300, n_desired=300)
+    run = RunOptions(executor="serial", seed=16)
+    abc_rejection(
+        Flaky(model, 0.2), UniformPrior(model.bounds), np.zeros((1, 10)), run=run, **arguments
     )
-    abc_rejection(Flaky(model, 0.2), UniformPrior(model.bounds), np.zeros((1, 10)), **arguments)
     assert capsys.readouterr().err == ""  # off by default when not on a terminal
     tree = abc_rejection(
-        Flaky(model, 0.2), UniformPrior(model.bounds), np.zeros((1, 10)), progress=True, **arguments
+        Flaky(model, 0.2),
+        UniformPrior(model.bounds),
+        np.zeros((1, 10)),
+        run=replace(run, progress=True),
+        **arguments,
     )
     err = capsys.readouterr().err
     assert "pilot" in err and "main" in err and "ETA" in err

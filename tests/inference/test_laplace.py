@@ -7,6 +7,7 @@ import numpy as np
 import pymc as pm
 import pytest
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.pymc.laplace import fit_reference
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
@@ -90,7 +91,9 @@ def test_smc_from_the_fit_gives_the_exact_posterior_with_fewer_simulations(quiet
             add_likelihood("y", PROBLEM, observed, sensor_noise=NOISE)
             reference = None
             if start == "fit":
-                reference = fit_reference(executor="serial", checkpoint=tmp_path / "fit.json")
+                reference = fit_reference(
+                    run=RunOptions(executor="serial", seed=0, checkpoint=tmp_path / "fit.json")
+                )
             tree = sample_smc_abc(
                 600, executor="serial", random_seed=1, reference=reference, progressbar=False
             )
@@ -120,7 +123,7 @@ def test_a_saved_fit_is_reused_only_for_the_same_data(quiet_pymc, tmp_path):
     for seed in (4, 4, 5):
         with pm.Model():
             add_likelihood("y", PROBLEM, PROBLEM.observed(TRUTH, seed), sensor_noise=NOISE)
-            fits.append(fit_reference(executor="serial", checkpoint=path))
+            fits.append(fit_reference(run=RunOptions(executor="serial", seed=0, checkpoint=path)))
     assert fits[1].digest() == fits[0].digest() and fits[1].simulations == fits[0].simulations
     assert fits[2].digest() != fits[0].digest()
 
@@ -130,13 +133,13 @@ def test_abc_nodes_and_bad_settings_are_refused(quiet_pymc):
     with pm.Model():
         add_simulator("y", PROBLEM, observed, epsilon=0.1)
         with pytest.raises(ValueError, match="exact-likelihood nodes only"):
-            fit_reference(executor="serial")
+            fit_reference(run=RunOptions(executor="serial"))
     with pm.Model():
         add_likelihood("y", PROBLEM, observed, sensor_noise=NOISE)
         with pytest.raises(ValueError, match="inflation must be >= 1"):
-            fit_reference(executor="serial", inflation=0.5)
+            fit_reference(run=RunOptions(executor="serial"), inflation=0.5)
         with pytest.raises(ValueError, match="max_simulations must allow"):
-            fit_reference(executor="serial", max_simulations=5)
+            fit_reference(run=RunOptions(executor="serial"), max_simulations=5)
 
 
 @dataclass(frozen=True)
@@ -162,8 +165,8 @@ def test_several_starts_find_both_modes_and_smc_weighs_them(quiet_pymc):
     observed = problem.observed(np.array([1.5, 1.0]), seed=2)
     with pm.Model():
         add_likelihood("y", problem, observed, sensor_noise=NOISE)
-        single = fit_reference(executor="serial")
-        reference = fit_reference(executor="serial", starts=4, seed=1)
+        single = fit_reference(run=RunOptions(executor="serial", seed=0))
+        reference = fit_reference(run=RunOptions(executor="serial", seed=1), starts=4)
         tree = sample_smc_abc(
             400, executor="serial", random_seed=2, reference=reference, progressbar=False
         )

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pymc as pm
 import pytest
 import xarray as xr
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.predictive import predictive_bands, simulate_predictive
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
@@ -37,7 +39,7 @@ def test_predictive_groups_and_bands(line_posterior):
     sim = AsDataset(LinearGaussian(n_time=40, sigma=0.01))
     truth = sim({"a": 2.0, "b": -0.5}, np.random.default_rng(1))
     tree = simulate_predictive(
-        line_posterior, sim, reference=truth, noise=False, executor="serial", seed=3
+        line_posterior, sim, reference=truth, noise=False, run=RunOptions(executor="serial", seed=3)
     )
     predictive = tree["posterior_predictive"].to_dataset()
     assert predictive["y"].dims == ("chain", "draw", "time")
@@ -58,7 +60,7 @@ def test_predictive_groups_and_bands(line_posterior):
 
 def test_noise_scales_widen_the_bands(line_posterior):
     sim = AsDataset(LinearGaussian(n_time=40, sigma=0.01))
-    settings = {"executor": "serial", "seed": 4, "outputs": ["y"]}
+    settings = {"run": RunOptions(executor="serial", seed=4), "outputs": ["y"]}
     clean = simulate_predictive(line_posterior, sim, noise=False, **settings)
     noisy = simulate_predictive(line_posterior, sim, noise=True, **settings)
     width_clean = np.diff(predictive_bands(clean)["y"].values[[0, 2]], axis=0)
@@ -73,22 +75,30 @@ def test_sensor_noise_in_engineering_units_widens_the_bands(line_posterior):
         {name: line_posterior["posterior"][name].values for name in ("a", "b")}
     )
     sim = AsDataset(LinearGaussian(n_time=40, sigma=0.0))
-    settings = {"parameters": ["a", "b"], "seed": 7}
-    clean = simulate_predictive(line_posterior, sim, noise=False, executor="serial", **settings)
+    settings = {"parameters": ["a", "b"]}
+    serial = RunOptions(executor="serial", seed=7)
+    clean = simulate_predictive(line_posterior, sim, noise=False, run=serial, **settings)
     sensor = SensorNoise(kinds={"y": "temperature"}, temperature=0.5)  # 0.5 (K) absolute
-    noisy = simulate_predictive(
-        line_posterior, sim, sensor_noise=sensor, executor="serial", **settings
-    )
+    noisy = simulate_predictive(line_posterior, sim, sensor_noise=sensor, run=serial, **settings)
     residual = noisy["posterior_predictive"]["y"] - clean["posterior_predictive"]["y"]
     assert float(residual.std()) == pytest.approx(0.5, rel=0.05)
     parallel = simulate_predictive(
-        line_posterior, sim, sensor_noise=sensor, executor="processes", **settings
+        line_posterior,
+        sim,
+        sensor_noise=sensor,
+        run=replace(serial, executor="processes"),
+        **settings,
     )
     xr.testing.assert_equal(
         noisy["posterior_predictive"].to_dataset(), parallel["posterior_predictive"].to_dataset()
     )
     unchanged = simulate_predictive(
-        line_posterior, sim, sensor_noise=sensor, noise=False, executor="serial", **settings
+        line_posterior,
+        sim,
+        sensor_noise=sensor,
+        noise=False,
+        run=serial,
+        **settings,
     )
     xr.testing.assert_equal(
         unchanged["posterior_predictive"].to_dataset(), clean["posterior_predictive"].to_dataset()
@@ -104,7 +114,7 @@ def test_learned_sensor_noise_scales_are_used_draw_by_draw(line_posterior):
         {"posterior": posterior.assign(sigma_y=(("chain", "draw"), scales))}
     )
     sim = AsDataset(LinearGaussian(n_time=200, sigma=0.0))
-    settings = {"parameters": ["a", "b"], "seed": 8, "executor": "serial"}
+    settings = {"parameters": ["a", "b"], "run": RunOptions(executor="serial", seed=8)}
     clean = simulate_predictive(learned, sim, noise=False, **settings)
     sensor = SensorNoise(kinds={"y": "temperature"}, temperature=0.5)
     noisy = simulate_predictive(learned, sim, sensor_noise=sensor, **settings)
@@ -120,14 +130,17 @@ def test_sensor_noise_needs_to_know_the_kind_of_each_output(line_posterior):
     sim = AsDataset(LinearGaussian(n_time=20))
     with pytest.raises(ValueError, match="output 'y' has units None; SensorNoise knows"):
         simulate_predictive(
-            line_posterior, sim, sensor_noise=SensorNoise(), executor="serial", seed=1
+            line_posterior,
+            sim,
+            sensor_noise=SensorNoise(),
+            run=RunOptions(executor="serial", seed=1),
         )
 
 
 def test_failed_draws_are_nan_counted_and_left_out_of_the_bands(line_posterior):
     sim = Flaky(AsDataset(LinearGaussian(n_time=20)), rate=0.3)
     tree = simulate_predictive(
-        line_posterior, sim, parameters=["a", "b"], executor="serial", seed=5
+        line_posterior, sim, parameters=["a", "b"], run=RunOptions(executor="serial", seed=5)
     )
     values = tree["posterior_predictive"]["y"].values
     failed = np.isnan(values).all(axis=2)
@@ -141,15 +154,22 @@ def test_failed_draws_are_nan_counted_and_left_out_of_the_bands(line_posterior):
 
 def test_results_do_not_depend_on_the_executor_and_draws_can_be_thinned(line_posterior):
     sim = AsDataset(LinearGaussian(n_time=20))
-    settings = {"seed": 6, "max_draws": 30}
-    serial = simulate_predictive(line_posterior, sim, executor="serial", **settings)
-    parallel = simulate_predictive(line_posterior, sim, executor="processes", **settings)
+    settings = {"max_draws": 30}
+    serial = simulate_predictive(
+        line_posterior, sim, run=RunOptions(executor="serial", seed=6), **settings
+    )
+    parallel = simulate_predictive(
+        line_posterior, sim, run=RunOptions(executor="processes", seed=6), **settings
+    )
     xr.testing.assert_equal(
         serial["posterior_predictive"].to_dataset(), parallel["posterior_predictive"].to_dataset()
     )
     assert serial["posterior_predictive"]["y"].shape == (2, 15, 20)
     from_sequence = simulate_predictive(
-        line_posterior, sim, executor="serial", seed=np.random.SeedSequence(6), max_draws=30
+        line_posterior,
+        sim,
+        run=RunOptions(executor="serial", seed=np.random.SeedSequence(6)),
+        max_draws=30,
     )
     xr.testing.assert_equal(
         serial["posterior_predictive"].to_dataset(),
@@ -160,15 +180,19 @@ def test_results_do_not_depend_on_the_executor_and_draws_can_be_thinned(line_pos
 def test_bad_arguments_are_named(line_posterior):
     sim = AsDataset(LinearGaussian(n_time=20))
     with pytest.raises(ValueError, match="interval must lie in"):
-        predictive_bands(simulate_predictive(line_posterior, sim, executor="serial"), 1.0)
+        predictive_bands(
+            simulate_predictive(line_posterior, sim, run=RunOptions(executor="serial")), 1.0
+        )
     with pytest.raises(ValueError, match="no posterior_predictive group; run simulate_predictive"):
         predictive_bands(line_posterior)
     with pytest.raises(ValueError, match=r"posterior lacks parameter\(s\) \['c'\]"):
-        simulate_predictive(line_posterior, sim, parameters=["c"], executor="serial")
+        simulate_predictive(
+            line_posterior, sim, parameters=["c"], run=RunOptions(executor="serial")
+        )
     with pytest.raises(ValueError, match="unknown outputs"):
-        simulate_predictive(line_posterior, sim, outputs=["TD"], executor="serial")
+        simulate_predictive(line_posterior, sim, outputs=["TD"], run=RunOptions(executor="serial"))
     with pytest.raises(ValueError, match="max_draws must be"):
-        simulate_predictive(line_posterior, sim, max_draws=0, executor="serial")
+        simulate_predictive(line_posterior, sim, max_draws=0, run=RunOptions(executor="serial"))
 
 
 def test_smc_posterior_predicts_a_longer_profile():
@@ -178,7 +202,7 @@ def test_smc_posterior_predicts_a_longer_profile():
         warnings.filterwarnings("ignore", message="Numba will use object mode")
         add_simulator("y", short, observed, noise=(0.0, 0.05), epsilon=0.5, distance=short.distance)
         idata = sample_smc_abc(draws=100, executor="serial", random_seed=8, progressbar=False)
-    tree = simulate_predictive(idata, long, executor="serial", seed=9)
+    tree = simulate_predictive(idata, long, run=RunOptions(executor="serial", seed=9))
     assert tree["posterior_predictive"]["y"].shape == (1, 100, 200)
     median = predictive_bands(tree)["y"].sel(band="median").values
     assert abs(median.mean() - idata.posterior["mu"].mean().item()) < 0.05
@@ -194,9 +218,7 @@ def test_vcc_predictive_keeps_time_and_units_of_the_simulator():
         posterior_tree({"M0": rng.normal(1.5, 0.02, (1, 6))}),
         sim,
         reference=truth,
-        executor="processes",
-        n_workers=2,
-        seed=1,
+        run=RunOptions(executor="processes", n_workers=2, seed=1),
     )
     predictive = tree["posterior_predictive"].to_dataset()
     np.testing.assert_array_equal(predictive["time"].values, truth["time"].values)

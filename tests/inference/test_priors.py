@@ -7,6 +7,7 @@ from scipy import stats
 from scipy.integrate import trapezoid
 from scipy.special import expit, logit
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.priors import (
     GMMPrior,
     UniformPrior,
@@ -155,11 +156,11 @@ def test_prior_bounds_outside_the_units_are_refused_by_every_sampler():
     wide = {"M0": (0.1, 5.0)}
     message = r"prior bounds of 'M0' \(0.1, 5\) .* parameter bounds \[0.9, 2.2\]"
     with pytest.raises(ValueError, match=message):
-        abc_rejection(simulator, UniformPrior(wide), observed, executor="serial")
+        abc_rejection(simulator, UniformPrior(wide), observed, run=RunOptions(executor="serial"))
     with pytest.raises(ValueError, match=message), pm.Model():
         add_simulator("vcc", simulator, observed, prior=wide)
     with pytest.raises(ValueError, match=message):
-        sobol_indices(simulator, wide, ["PD"], executor="serial")
+        sobol_indices(simulator, wide, ["PD"], run=RunOptions(executor="serial"))
     extrapolating = VCCSimulator(parameters=["M0"], outputs=["PD"], allow_outside_unit_bounds=True)
     check_prior_support(check_simulator(extrapolating).support, wide)  # asked for: allowed
     check_prior_support(check_simulator(simulator).support, {"M0": (1.0, 2.0)})

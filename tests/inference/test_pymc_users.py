@@ -169,6 +169,7 @@ def test_chains_with_different_numbers_of_stages_are_padded():
 
 
 def test_both_samplers_return_the_same_layout():
+    from pymc_vcc.execution.options import RunOptions
     from pymc_vcc.inference.priors import UniformPrior
     from pymc_vcc.inference.rejection import abc_rejection
 
@@ -177,9 +178,15 @@ def test_both_samplers_return_the_same_layout():
         coords={"time": ("time", np.arange(40.0), {"units": "s"})},
     )
     rejection = abc_rejection(
-        SIM, UniformPrior(SIM.bounds), observed, n_pilot=40, n_main=100, n_desired=10,
-        quantile=0.2, executor="serial", seed=1, progress=False,
-    )  # fmt: skip
+        SIM,
+        UniformPrior(SIM.bounds),
+        observed,
+        n_pilot=40,
+        n_main=100,
+        n_desired=10,
+        quantile=0.2,
+        run=RunOptions(executor="serial", seed=1, progress=False),
+    )
     with pm.Model():
         add_simulator("y", SIM, observed, epsilon=0.3, distance=SIM.distance)
         smc = sample_smc_abc(draws=20, executor="serial", random_seed=1, **QUIET)

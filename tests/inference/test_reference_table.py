@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.store import CheckpointDamagedError, CheckpointMismatchError
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
@@ -20,9 +21,13 @@ def measured(charge: float, seed: int):
     return NOISE.measure(PROBLEM.dataset(charge), np.random.default_rng(seed))
 
 
-def table(seed: int, **options):
+def table(seed: int, checkpoint=None):
     return simulate_table(
-        PROBLEM, PRIOR, PROBLEM.dataset(1.5), executor="serial", seed=seed, **SIZES, **options
+        PROBLEM,
+        PRIOR,
+        PROBLEM.dataset(1.5),
+        run=RunOptions(executor="serial", seed=seed, checkpoint=checkpoint),
+        **SIZES,
     )
 
 
@@ -35,8 +40,7 @@ def test_table_with_the_samplers_seed_gives_abc_rejections_posterior():
         quantile=0.2,
         n_desired=15,
         sensor_noise=NOISE,
-        executor="serial",
-        seed=7,
+        run=RunOptions(executor="serial", seed=7),
         **SIZES,
     )
     shared = table_rejection(
@@ -78,9 +82,7 @@ def test_a_checkpointed_table_resumes_without_simulating(tmp_path, monkeypatch):
         PROBLEM,
         PRIOR,
         PROBLEM.dataset(1.5),
-        executor="serial",
-        seed=5,
-        checkpoint=tmp_path / "table",
+        run=RunOptions(executor="serial", seed=5, checkpoint=tmp_path / "table"),
         **SIZES,
     )
     for phase in built.values:
@@ -90,9 +92,7 @@ def test_a_checkpointed_table_resumes_without_simulating(tmp_path, monkeypatch):
             PROBLEM,
             PRIOR,
             PROBLEM.dataset(1.5),
-            executor="serial",
-            seed=5,
-            checkpoint=tmp_path / "table",
+            run=RunOptions(executor="serial", seed=5, checkpoint=tmp_path / "table"),
             n_pilot=40,
             n_main=100,
         )
@@ -145,6 +145,6 @@ def test_a_damaged_chunk_and_noise_scales_in_the_prior_are_refused(tmp_path):
             PROBLEM,
             PRIOR.extended({"sigma_TD": (0.1, 1.0)}),
             PROBLEM.dataset(1.5),
-            executor="serial",
+            run=RunOptions(executor="serial"),
             **SIZES,
         )

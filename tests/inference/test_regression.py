@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.noise import SensorNoise, with_noise
 from pymc_vcc.inference.priors import GMMPrior, UniformPrior
 from pymc_vcc.inference.regression import (
@@ -110,8 +111,7 @@ def test_regression_abc_gives_the_exact_posterior_of_noisy_sensor_data():
         observed,
         n=3000,
         sensor_noise=ABSOLUTE,
-        executor="serial",
-        seed=2,
+        run=RunOptions(executor="serial", seed=2),
     )
     draws = tree["posterior"]["M0"].values.ravel()
     assert draws.mean() == pytest.approx(exact_mean, abs=0.2 * exact_sd)
@@ -130,7 +130,12 @@ def test_learnable_noise_scales_are_drawn_simulated_and_adjusted_like_parameters
     prior = with_noise(UniformPrior(PROBLEM.bounds), {"TD": (0.0, 0.01)}, PROBLEM.output_names)
     rough = _posterior({"M0": np.linspace(1.3, 1.45, 50), "nu_TD": np.linspace(0.0, 0.004, 50)})
     tree = regression_abc(
-        PROBLEM, prior, rough, PROBLEM.dataset(1.37), n=800, executor="serial", seed=0
+        PROBLEM,
+        prior,
+        rough,
+        PROBLEM.dataset(1.37),
+        n=800,
+        run=RunOptions(executor="serial", seed=0),
     )
     posterior = tree["posterior"]
     assert set(posterior.data_vars) == {"M0", "nu_TD"}
@@ -150,9 +155,7 @@ def test_failures_are_counted_and_a_checkpoint_resumes_without_simulating(tmp_pa
     run = dict(
         n=600,
         sensor_noise=ABSOLUTE,
-        executor="serial",
-        seed=5,
-        checkpoint=tmp_path / "regression",
+        run=RunOptions(executor="serial", seed=5, checkpoint=tmp_path / "regression"),
     )
     first = regression_abc(simulator, UniformPrior(PROBLEM.bounds), rough, observed, **run)
     calls = len(log.read_text().splitlines())
@@ -198,7 +201,13 @@ def test_a_mixture_prior_is_drawn_inside_the_box_or_whole_when_the_box_holds_too
     off = _posterior({"M0": np.linspace(2.0, 2.1, 20), "nu_TD": np.linspace(0.004, 0.006, 20)})
     with pytest.warns(RuntimeWarning, match="this round draws from the whole prior"):
         tree = regression_abc(
-            PROBLEM, correlated, off, PROBLEM.dataset(1.37), n=200, rounds=1, executor="serial"
+            PROBLEM,
+            correlated,
+            off,
+            PROBLEM.dataset(1.37),
+            n=200,
+            rounds=1,
+            run=RunOptions(executor="serial"),
         )
     assert float(tree["sample_stats"]["box_low"].sel(parameter="M0").item()) == bounds["M0"][0]
 

@@ -1,11 +1,13 @@
 """Sobol indices against the Ishigami function's exact values, with and without failures."""
 
 import sqlite3
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import xarray as xr
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.sensitivity import WindowMean, sobol_indices
 
 A, B = 7.0, 0.1
@@ -43,7 +45,12 @@ def sometimes_failing_ishigami(theta, rng):
 
 def test_ishigami_indices_match_exact_values():
     result = sobol_indices(
-        ishigami, BOUNDS, ["ishigami", "linear"], n_base=1024, window=None, executor="serial"
+        ishigami,
+        BOUNDS,
+        ["ishigami", "linear"],
+        n_base=1024,
+        window=None,
+        run=RunOptions(executor="serial", seed=0),
     )
     s1 = result["S1"].sel(output="ishigami").values
     st = result["ST"].sel(output="ishigami").values
@@ -62,8 +69,7 @@ def test_failed_runs_drop_whole_blocks_and_keep_estimates():
         ["ishigami"],
         n_base=1024,
         window=None,
-        executor="serial",
-        seed=3,
+        run=RunOptions(executor="serial", seed=3),
     )
     n_failed = result.attrs["n_failed"]
     assert 0.01 * 5120 < n_failed < 0.05 * 5120
@@ -83,11 +89,13 @@ def test_window_mean_averages_inside_the_window():
 
 def test_bad_arguments_are_clear_errors():
     with pytest.raises(ValueError, match="low"):
-        sobol_indices(ishigami, {"x1": (1.0, 0.0)}, ["ishigami"], executor="serial")
+        sobol_indices(ishigami, {"x1": (1.0, 0.0)}, ["ishigami"], run=RunOptions(executor="serial"))
     with pytest.raises(ValueError, match="outputs is empty"):
-        sobol_indices(ishigami, BOUNDS, [], executor="serial")
+        sobol_indices(ishigami, BOUNDS, [], run=RunOptions(executor="serial"))
     with pytest.raises(ValueError, match="window"):
-        sobol_indices(ishigami, BOUNDS, ["ishigami"], window=(5.0, 1.0), executor="serial")
+        sobol_indices(
+            ishigami, BOUNDS, ["ishigami"], window=(5.0, 1.0), run=RunOptions(executor="serial")
+        )
 
 
 class CountingIshigami:
@@ -104,18 +112,25 @@ class CountingIshigami:
 
 
 def test_an_interrupted_sobol_run_resumes_without_rerunning_and_gives_the_same_indices(tmp_path):
-    arguments = dict(n_base=64, window=None, executor="serial", seed=3)
-    reference = sobol_indices(CountingIshigami(), BOUNDS, ["ishigami"], **arguments)
+    arguments = dict(n_base=64, window=None)
+    serial = RunOptions(executor="serial", seed=3)
+    reference = sobol_indices(CountingIshigami(), BOUNDS, ["ishigami"], run=serial, **arguments)
     checkpoint = tmp_path / "sobol.sqlite"
     with pytest.raises(KeyboardInterrupt):
         sobol_indices(
-            CountingIshigami(stop=200), BOUNDS, ["ishigami"], checkpoint=checkpoint, **arguments
+            CountingIshigami(stop=200),
+            BOUNDS,
+            ["ishigami"],
+            run=replace(serial, checkpoint=checkpoint),
+            **arguments,
         )
     connection = sqlite3.connect(checkpoint)
     (persisted,) = connection.execute("SELECT COUNT(*) FROM results").fetchone()
     connection.close()
     assert 0 < persisted < 200
     resumed_model = CountingIshigami()
-    resumed = sobol_indices(resumed_model, BOUNDS, ["ishigami"], checkpoint=checkpoint, **arguments)
+    resumed = sobol_indices(
+        resumed_model, BOUNDS, ["ishigami"], run=replace(serial, checkpoint=checkpoint), **arguments
+    )
     assert resumed_model.runs == 64 * 5 - persisted  # none of the persisted runs ran again
     xr.testing.assert_identical(resumed, reference)

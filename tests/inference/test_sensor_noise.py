@@ -5,6 +5,7 @@ import pymc as pm
 import pytest
 from scipy import stats
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.likelihood import log_likelihood
 from pymc_vcc.inference.noise import OutputNoise, SensorNoise, sensor_parameter
 from pymc_vcc.inference.priors import UniformPrior
@@ -98,9 +99,7 @@ def test_rejection_with_sensor_noise_learns_scales_by_name():
         n_main=600,
         n_desired=60,
         sensor_noise=noise,
-        executor="serial",
-        seed=4,
-        progress=False,
+        run=RunOptions(executor="serial", seed=4, progress=False),
     )
     posterior = tree["posterior"]
     assert set(posterior.data_vars) == {"M0", *(sensor_parameter(o) for o in clean.names)}
@@ -145,9 +144,7 @@ def test_sequential_calibration_carries_learnable_sensor_scales_into_the_gmm():
         quantile=0.2,
         n_main=200,
         n_desired=30,
-        executor="serial",
-        seed=9,
-        progress=False,
+        run=RunOptions(executor="serial", seed=9, progress=False),
     )
     names = {"M0", "sigma_TD", "sigma_PD", "sigma_MDOT"}
     assert set(result.priors[1].names) == names

@@ -1,14 +1,18 @@
 """Sequential calibration: GMM transfer narrows the next posterior; results save and reload."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.priors import GMMPrior, UniformPrior
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
 from pymc_vcc.testing import GaussianLocation, Recording
 
 MODEL = GaussianLocation(n_time=20, sigma=1.0, low=-1.0, high=1.0)
-BUDGET = dict(n_pilot=500, quantile=0.1, n_main=4000, n_desired=4000, executor="serial")
+BUDGET = dict(n_pilot=500, quantile=0.1, n_main=4000, n_desired=4000)
+SERIAL = RunOptions(executor="serial")
 
 
 def _datasets(n, seed=0):
@@ -18,7 +22,7 @@ def _datasets(n, seed=0):
 
 def test_gmm_transfer_narrows_the_second_posterior_to_the_two_dataset_posterior():
     datasets = _datasets(2)
-    common = dict(distance=MODEL.distance, seed=1, **BUDGET)
+    common = dict(distance=MODEL.distance, run=replace(SERIAL, seed=1), **BUDGET)
     transferred = sequential_calibration(MODEL, UniformPrior(MODEL.bounds), datasets, **common)
     restarted = sequential_calibration(
         MODEL, UniformPrior(MODEL.bounds), datasets, keep_uniform=True, **common
@@ -45,7 +49,7 @@ def test_keeping_the_uniform_prior_runs_independent_stages_with_the_stage_seeds(
         datasets,
         keep_uniform=True,
         distance=MODEL.distance,
-        seed=3,
+        run=replace(SERIAL, seed=3),
         **(BUDGET | {"n_main": 1000, "n_desired": 50}),
     )
     assert len(result) == 3
@@ -58,7 +62,11 @@ def test_keeping_the_uniform_prior_runs_independent_stages_with_the_stage_seeds(
 def test_a_drift_widens_each_next_prior_by_the_step_of_its_parameters():
     """Three datasets with ``drift``: each fitted prior is the last posterior widened by the
     step (here 0.1 of the range of mu, sd 0.2 against a posterior sd of ~0.2)."""
-    options = dict(distance=MODEL.distance, seed=3, **(BUDGET | {"n_main": 1000, "n_desired": 200}))
+    options = dict(
+        distance=MODEL.distance,
+        run=replace(SERIAL, seed=3),
+        **(BUDGET | {"n_main": 1000, "n_desired": 200}),
+    )
     datasets = _datasets(3, seed=2)
     still, drifting = (
         sequential_calibration(MODEL, UniformPrior(MODEL.bounds), datasets, drift=d, **options)
@@ -81,7 +89,7 @@ def test_results_with_noise_scales_save_and_reload_with_their_priors(tmp_path):
         _datasets(2, seed=4),
         noise={"y": (0.0, 0.2)},
         max_components=2,
-        seed=5,
+        run=replace(SERIAL, seed=5),
         **(BUDGET | {"n_main": 1500, "n_desired": 100}),
     )
     assert result.priors[0].names == result.priors[1].names == ("mu", "nu_y")
@@ -104,7 +112,7 @@ def test_a_restarted_sequence_resumes_from_its_checkpoint_folder(tmp_path):
         first_prior=UniformPrior(MODEL.bounds),
         datasets=_datasets(2, seed=6),
         distance=MODEL.distance,
-        checkpoint=tmp_path / "checkpoints",
+        run=replace(SERIAL, checkpoint=tmp_path / "checkpoints"),
         **(BUDGET | {"n_main": 1000, "n_desired": 50}),
     )
     first = sequential_calibration(**arguments)  # no seed: the folder keeps the drawn one
@@ -122,8 +130,11 @@ def test_a_restarted_sequence_resumes_from_its_checkpoint_folder(tmp_path):
 
 def test_bad_sequences_are_clear_errors():
     with pytest.raises(ValueError, match="datasets is empty"):
-        sequential_calibration(MODEL, UniformPrior(MODEL.bounds), [], executor="serial")
+        sequential_calibration(MODEL, UniformPrior(MODEL.bounds), [], run=SERIAL)
     with pytest.raises(ValueError, match="got 2 simulators for 3 datasets"):
         sequential_calibration(
-            [MODEL, MODEL], UniformPrior(MODEL.bounds), _datasets(3), executor="serial"
+            [MODEL, MODEL],
+            UniformPrior(MODEL.bounds),
+            _datasets(3),
+            run=SERIAL,
         )

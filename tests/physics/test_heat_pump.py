@@ -4,6 +4,7 @@ charge calibration with the same samplers as the cooling unit."""
 import numpy as np
 import pytest
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.priors import UniformPrior
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.physics.inputs import WINTER_PROFILE, builtin_inputs, window
@@ -85,9 +86,7 @@ def test_charge_calibrates_with_the_rejection_sampler(unit):
         quantile=0.2,
         n_main=24,
         n_desired=24,
-        executor="serial",
-        seed=3,
-        progress=False,
+        run=RunOptions(executor="serial", seed=3, progress=False),
     )
     charge = tree.posterior["M0"].values.ravel()
     assert charge.size >= 3

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.identifiability import identifiability
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.physics.simulate import VCCSimulator
@@ -63,21 +64,25 @@ def exact_information(noise_sd: float, correlation: float = 0.0) -> np.ndarray:
 @pytest.mark.parametrize("correlation", [0.0, 0.6])
 def test_information_is_the_exact_fisher_information(correlation):
     noise = SensorNoise(temperature=0.2, correlation=correlation)
-    found = identifiability(Product(), noise, at=AT, executor="serial")
+    found = identifiability(Product(), noise, at=AT, run=RunOptions(executor="serial"))
     np.testing.assert_allclose(found.information, exact_information(0.2, correlation), rtol=1e-6)
     assert found.simulations == 9 and not found.failed
 
 
 def test_student_t_errors_carry_less_information():
-    gaussian = identifiability(Product(), SensorNoise(temperature=0.2), at=AT, executor="serial")
+    gaussian = identifiability(
+        Product(), SensorNoise(temperature=0.2), at=AT, run=RunOptions(executor="serial")
+    )
     heavy = identifiability(
-        Product(), SensorNoise(temperature=0.2, dof=4.0), at=AT, executor="serial"
+        Product(), SensorNoise(temperature=0.2, dof=4.0), at=AT, run=RunOptions(executor="serial")
     )
     np.testing.assert_allclose(heavy.information, gaussian.information * 5.0 / 7.0, rtol=1e-12)
 
 
 def test_directions_name_the_product_and_the_inert_parameter():
-    found = identifiability(Product(), SensorNoise(temperature=0.2), at=AT, executor="serial")
+    found = identifiability(
+        Product(), SensorNoise(temperature=0.2), at=AT, run=RunOptions(executor="serial")
+    )
     weak = found.not_identified()
     assert len(weak) == 2 and all(d.sd_ratio == pytest.approx(1.0, abs=1e-9) for d in weak)
     # a·b fixed: a relative move δa/a needs b to move by -δa/a; in prior sds, the unit axis
@@ -96,7 +101,9 @@ def test_directions_name_the_product_and_the_inert_parameter():
 
 
 def test_confounding_is_the_fitted_shift_a_held_parameter_causes():
-    found = identifiability(Product(), SensorNoise(temperature=0.2), at=AT, executor="serial")
+    found = identifiability(
+        Product(), SensorNoise(temperature=0.2), at=AT, run=RunOptions(executor="serial")
+    )
     table = found.confounding(["a", "c"])
     assert list(table.index) == ["b", "d"] and list(table.columns) == ["a", "c"]
     # a·b is what T1 sees: a true b one prior sd above the held value reads as a higher a
@@ -113,7 +120,10 @@ def test_confounding_is_the_fitted_shift_a_held_parameter_causes():
 
 def test_a_failed_perturbation_is_reported_not_raised():
     found = identifiability(
-        Product(fail_above=0.52), SensorNoise(temperature=0.2), at=AT, executor="serial"
+        Product(fail_above=0.52),
+        SensorNoise(temperature=0.2),
+        at=AT,
+        run=RunOptions(executor="serial"),
     )
     assert set(found.failed) == {"d"} and "too large d" in found.failed["d"]
     assert np.isnan(found.sd_ratio["d"]) and found.sd_ratio["c"] < 0.05
@@ -122,7 +132,9 @@ def test_a_failed_perturbation_is_reported_not_raised():
 
 def test_steps_stay_inside_the_bounds():
     at_edge = {**AT, "c": 2.0}
-    found = identifiability(Product(), SensorNoise(temperature=0.2), at=at_edge, executor="serial")
+    found = identifiability(
+        Product(), SensorNoise(temperature=0.2), at=at_edge, run=RunOptions(executor="serial")
+    )
     np.testing.assert_allclose(found.information, exact_information(0.2), rtol=1e-6)
 
 
@@ -137,7 +149,9 @@ def test_steps_stay_inside_the_bounds():
 )
 def test_bad_input_is_refused_in_one_line(kwargs, message):
     with pytest.raises(ValueError, match=message):
-        identifiability(Product(), SensorNoise(), **{"at": AT, **kwargs}, executor="serial")
+        identifiability(
+            Product(), SensorNoise(), **{"at": AT, **kwargs}, run=RunOptions(executor="serial")
+        )
 
 
 @dataclass(frozen=True)
@@ -155,12 +169,14 @@ class Idle:
 
 def test_a_zero_noise_scale_is_refused():
     with pytest.raises(ValueError, match="sensor noise of output 'W_comp' is zero"):
-        identifiability(Idle(), SensorNoise.typical(), executor="serial")
+        identifiability(Idle(), SensorNoise.typical(), run=RunOptions(executor="serial"))
 
 
 def test_a_failed_point_is_refused():
     with pytest.raises(RuntimeError, match="the simulation at the point failed: too large d"):
-        identifiability(Product(fail_above=0.1), SensorNoise(), at=AT, executor="serial")
+        identifiability(
+            Product(fail_above=0.1), SensorNoise(), at=AT, run=RunOptions(executor="serial")
+        )
 
 
 def test_split_unit_compressor_losses_trade_off_and_fans_speeds_are_inert():
@@ -169,7 +185,7 @@ def test_split_unit_compressor_losses_trade_off_and_fans_speeds_are_inert():
     simulator = VCCSimulator(
         t_window=(0.0, 300.0), parameters=["M0", "CF_POW", "CF_PREF", "FO_SPEED"], solver="cvode"
     )
-    found = identifiability(simulator, SensorNoise.typical(), executor="serial")
+    found = identifiability(simulator, SensorNoise.typical(), run=RunOptions(executor="serial"))
     weak = found.not_identified()
     assert len(weak) == 2
     fan, losses = weak
@@ -239,6 +255,6 @@ def test_logging_compressor_power_separates_its_loss_factors():
         outputs=[*OUTPUT_IDS, "W_comp"],
         solver="cvode",
     )
-    found = identifiability(simulator, SensorNoise.typical(), executor="serial")
+    found = identifiability(simulator, SensorNoise.typical(), run=RunOptions(executor="serial"))
     assert not found.not_identified()
     assert found.sd_ratio["CF_POW"] < 0.05 and found.sd_ratio["CF_PREF"] < 0.5

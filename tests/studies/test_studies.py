@@ -15,6 +15,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from pymc_vcc.cli import main
 from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.distances import BATCH_DISTANCES, windowed_distances
 from pymc_vcc.inference.identifiability import Direction
 from pymc_vcc.inference.likelihood import log_likelihood
@@ -85,10 +86,27 @@ def test_bad_study_settings_are_clear_errors():
         StudySettings(budget="huge")
     with pytest.raises(ValueError, match="executor"):
         StudySettings(executor="gpu")
+    with pytest.raises(ValueError, match="n_workers"):
+        StudySettings(n_workers=0)
+    with pytest.raises(ValueError, match="time_limit"):
+        StudySettings(time_limit=-1.0)
     with pytest.raises(ValueError, match="references_kg"):
         leak_study(StudySettings(budget="smoke", executor="serial"), references_kg=[3.0])
     with pytest.raises(ValueError, match="sampler"):
         leak_study(StudySettings(budget="smoke", executor="serial"), sampler="mcmc")
+
+
+def test_a_studys_runs_take_its_time_limit_and_progress_and_the_seed_given(tmp_path):
+    settings = StudySettings(executor="serial", time_limit=30.0, progress=False, seed=3)
+    with settings.open_executor() as executor:
+        run = settings.run_options(executor, seed=7, checkpoint=tmp_path / "c.sqlite")
+    assert run == RunOptions(
+        executor=executor,
+        seed=7,
+        checkpoint=tmp_path / "c.sqlite",
+        time_limit=30.0,
+        progress=False,
+    )
 
 
 def test_killed_leak_run_resumes_and_completes(tmp_path):

@@ -34,7 +34,6 @@ import hashlib
 import json
 from collections.abc import Callable
 from contextlib import closing
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -48,7 +47,8 @@ from scipy.optimize import least_squares
 from scipy.special import expit, logit
 from scipy.stats import chi2
 
-from pymc_vcc.execution.executors import Executor, ExecutorKind, executor_scope
+from pymc_vcc.execution.executors import Executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.outcomes import SimulationOutcome
 from pymc_vcc.inference.likelihood import innovations
 from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest
@@ -132,14 +132,11 @@ def _fingerprint(model: Model | None = None, **settings: Any) -> str:
 def fit_reference(
     model: Model | None = None,
     *,
-    executor: Executor | ExecutorKind = "processes",
-    n_workers: int | None = None,
     starts: int = 1,
     max_simulations: int = 3000,
     step: float = 1e-2,
     inflation: float = 1.2,
-    seed: int = 0,
-    checkpoint: str | Path | None = None,
+    run: RunOptions | None = None,
 ) -> GaussianReference:
     """Fit the model's exact-likelihood nodes by least squares from ``starts`` points and return
     the Laplace approximation at each distinct mode found, the start of
@@ -148,18 +145,16 @@ def fit_reference(
     Args:
         model: a model whose ``pm.Simulator`` nodes all come from
             :func:`~pymc_vcc.inference.pymc.likelihood.add_likelihood` (default: the current).
-        executor: an open executor (left open) or a kind opened here (see
-            :func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`).
-        n_workers: workers of an executor opened here (default: every core).
         starts: fits, the first from the prior's initial point, the others from uniform
             places in the middle 80 % of the unit box; fits ending within the 99.9 % ellipsoid
             of a better one are the same mode.
         max_simulations: simulations each fit may run (about dimension + 1 per iteration).
         step: forward-difference step in the unit box (a fraction of a box's width).
         inflation: factor on the Laplace standard deviations (≥ 1: a wider start is safer).
-        seed: seeds the other starts and the simulations' random streams.
-        checkpoint: JSON file keeping the finished fit; a later call with the same model, data
-            and settings loads it instead of fitting again.
+        run: where the fits' simulations run (their time limit is the nodes' own); its
+            ``seed`` seeds the other starts and the simulations' random streams, and its
+            ``checkpoint`` is a JSON file keeping the finished fit (a later call with the same
+            model, data and settings loads it instead of fitting again).
 
     Returns:
         The :class:`~pymc_vcc.inference.pymc.reference.GaussianReference`, with the fits'
@@ -171,6 +166,8 @@ def fit_reference(
         raise ValueError(f"step must be positive, got {step}")
     if isinstance(starts, bool) or int(starts) != starts or starts < 1:
         raise ValueError(f"starts must be a positive integer, got {starts!r}")
+    run = run or RunOptions()
+    seed, checkpoint = run.seed, run.checkpoint
     model = modelcontext(model)
     fingerprint = _fingerprint(
         model,
@@ -178,7 +175,9 @@ def fit_reference(
         max_simulations=max_simulations,
         step=step,
         inflation=inflation,
-        seed=seed,
+        seed=seed
+        if not isinstance(seed, np.random.SeedSequence)
+        else [str(seed.entropy), list(seed.spawn_key)],
     )
     if checkpoint is not None and (saved := GaussianReference.load(checkpoint, fingerprint)):
         return saved
@@ -192,8 +191,8 @@ def fit_reference(
     rng = np.random.default_rng(seed)
     places = [expit(np.clip(origin, -FIT_BOUND, FIT_BOUND))]
     places += [rng.uniform(0.1, 0.9, dimension) for _ in range(starts - 1)]
-    with executor_scope(executor, n_workers) as opened:
-        residuals = _Residuals(model, opened, np.random.SeedSequence(seed))
+    with run.open_executor() as opened:
+        residuals = _Residuals(model, opened, run.seed_sequence())
         if residuals.batch(origin[np.newaxis])[0] is None:
             raise RuntimeError(
                 "the fit's starting point (the prior's initial point) failed to simulate; "

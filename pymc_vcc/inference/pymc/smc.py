@@ -70,8 +70,8 @@ from pymc_vcc.execution.executors import (
     ExecutorKind,
     ProcessExecutor,
     SerialExecutor,
-    executor_scope,
 )
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.outcomes import OK
 from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore, describe_callable
 from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest
@@ -500,6 +500,12 @@ def sample_smc_abc(
     """SMC-ABC of the current model with :class:`ParallelIMH` (or :class:`ParallelMH`) and
     defaults for costly simulators.
 
+    Its executor, workers and checkpoint are keywords of their own, as ``pm.sample_smc``'s
+    are, not a :class:`~pymc_vcc.execution.options.RunOptions`: the seed and the progress bar
+    keep PyMC's names (``random_seed``, ``progressbar``), each simulator node carries its own
+    time limit (``add_simulator(time_limit_s=...)``), and a failed simulation is a zero
+    likelihood, not a failure rate to stop at.
+
     Args:
         draws: particles per stage (and posterior draws per chain). A run costs about
             draws × (1 + mutation steps over all stages) simulations, typically 10–40 × draws
@@ -571,7 +577,8 @@ def sample_smc_abc(
             stacklevel=2,
         )
     try:
-        with executor_scope(executor, n_workers) as opened, warnings.catch_warnings():
+        opening = RunOptions(executor=executor, n_workers=n_workers).open_executor()
+        with opening as opened, warnings.catch_warnings():
             # The distance kernel is a Python Op by design: the simulations run outside PyTensor.
             warnings.filterwarnings("ignore", "Numba will use object mode", UserWarning)
             tree = pm.sample_smc(
