@@ -9,7 +9,7 @@ from pymc_vcc.cli import main
 from pymc_vcc.physics.inputs import builtin_inputs, input_segments, window
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.real_units import _summarise
-from pymc_vcc.studies.unit_log import fixed_spread, held_inputs
+from pymc_vcc.studies.record_budget import fixed_spread, held_inputs
 
 
 @pytest.mark.slow
@@ -90,14 +90,14 @@ def test_finer_coils_read_as_the_model_at_a_higher_charge():
     from pymc_vcc.execution.executors import make_executor
     from pymc_vcc.inference.error_model import SensorAccuracy, summarise
     from pymc_vcc.physics.simulate import VCCSimulator
-    from pymc_vcc.studies.truths import generate_truth
-    from pymc_vcc.studies.unit_log import (
+    from pymc_vcc.studies.record_budget import (
         FINE_VOLUMES,
-        SETTLE,
         CoilOffset,
         SensorBudget,
         coil_offset,
     )
+    from pymc_vcc.studies.truths import generate_truth
+    from pymc_vcc.studies.unit_log import SETTLE
 
     truth = generate_truth("model", seed=2, charge=1.5, t_end=600.0)
     unit = load_unit()
