@@ -72,6 +72,7 @@ def _record(args: argparse.Namespace) -> int:
         drift=args.drift,
         alarm_fraction=args.alarm_fraction,
         rounds=args.rounds,
+        coils=args.coils,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations, "
@@ -361,7 +362,16 @@ def _add_rounds_option(parser: argparse.ArgumentParser) -> None:
 
 def _add_record_options(parser: argparse.ArgumentParser) -> None:
     """Options of the commands that read a unit's own log."""
+    from pymc_vcc.studies.record_budget import COILS
+
     _add_rounds_option(parser)
+    parser.add_argument(
+        "--coils",
+        choices=list(COILS),
+        default="finer",
+        help="whose coils made the log: finer (a physical unit, the default) or model (data "
+        "this model generated: no coil offset)",
+    )
     parser.add_argument(
         "--columns",
         metavar="TOML",

@@ -3,10 +3,11 @@
 For each truth variant (:mod:`pymc_vcc.studies.truths`) and each of ``n_datasets`` seeds, a
 unit is drawn, its record generated, and the charge calibrated with
 :func:`~pymc_vcc.studies.unit_log.calibrate_record` (the charge among the nuisance parameters,
-under the error budget, uniform prior on the unit's box). Reported per variant: the mean
-absolute error of the posterior mean, the median width of the 95 % interval, the fraction of
-intervals covering the true charge, simulations and wall time per dataset, and the outputs the
-predictive check flagged.
+under the error budget, uniform prior on the unit's box; the ``model`` variant's records as
+the model's own data, the others as a physical unit's: ``coils``). Reported per variant: the
+mean absolute error of the posterior mean, the median width of the 95 % interval, the
+fraction of intervals covering the true charge, simulations and wall time per dataset, and
+the outputs the predictive check flagged.
 
 With ``alarm`` each unit is also recorded twice more, unchanged and with 20 % of its charge lost
 (same unit, other noise), and each later record is calibrated with the commissioning posterior
@@ -90,6 +91,7 @@ def _calibrated(truth, executor, settings: StudySettings, budget, prior=None):
         rounds=rounds,
         seed=settings.seed,
         solver=settings.solver or "cvode",
+        coils="model" if truth.variant == "model" else "finer",
     )
     return tree, {
         **charge_summary(tree),

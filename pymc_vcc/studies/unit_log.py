@@ -46,8 +46,10 @@ from pymc_vcc.studies.record_budget import (
     CHARGE,
     ERROR_DRAWS,
     FINE_VOLUMES,
+    RUNS_PER_DRAW,
     CoilOffset,
     SensorBudget,
+    check_coils,
     coil_offset,
     error_budget,
     held_inputs,
@@ -104,6 +106,7 @@ def calibrate_record(
     solver: str | Solver = "cvode",
     progressbar: bool = False,
     rounds: int = 1,
+    coils: str = "finer",
 ) -> xr.DataTree:
     """The posterior of ``parameters`` given a record of a real unit.
 
@@ -125,11 +128,16 @@ def calibrate_record(
             previous posterior's draws (local rather than over the whole prior); the rounds
             before the last scout with :data:`SCOUTING_SHARE` of the particles and draws.
         progressbar: show PyMC's progress bar.
+        coils: whose coils made the record
+            (:data:`~pymc_vcc.studies.record_budget.COILS`): ``finer`` for a physical unit
+            (the default: every real unit), ``model`` for data the model itself generated
+            (then no coil offset, and the model-error draws keep the model's coils).
 
     Returns:
-        The ArviZ DataTree. When the charge is inferred, ``posterior`` holds the unit's
-        charge in ``M0`` and the model's equivalent charge in ``M0_model`` (they differ by the
-        coils' offset, :class:`~pymc_vcc.studies.record_budget.CoilOffset`, measured first:
+        The ArviZ DataTree. When the charge is inferred from a unit's record (``coils``
+        ``finer``), ``posterior`` holds the unit's charge in ``M0`` and the model's
+        equivalent charge in ``M0_model`` (they differ by the coils' offset,
+        :class:`~pymc_vcc.studies.record_budget.CoilOffset`, measured first:
         ``coil_offset_kg`` in ``sample_stats``). ``sample_stats`` also holds the predictive
         check per output (``ppc_z_mean``, ``ppc_p_value``, ``ppc_misfit``), the last error
         budget's size (``error_draws``, ``error_failed``, ``error_rounds``) and every
@@ -139,6 +147,7 @@ def calibrate_record(
     prior = box_prior(unit, parameters) if prior is None else prior
     if rounds < 1:
         raise ValueError(f"rounds must be at least 1, got {rounds}")
+    check_coils(coils)
     rng = np.random.default_rng(seed)
     t_end = float(observed["time"].values[-1])
     model = VCCSimulator(
@@ -152,7 +161,7 @@ def calibrate_record(
     )
     accuracy = SensorAccuracy() if accuracy is None else accuracy
     thetas, simulations, offset = None, 0, None
-    if CHARGE in prior.names:
+    if CHARGE in prior.names and coils == "finer":
         sensors = SensorBudget.of(model, observed, accuracy)
         spec = unit.parameters[CHARGE]
         offset, simulations = coil_offset(
@@ -176,6 +185,7 @@ def calibrate_record(
             n_draws=n_error,
             thetas=None if thetas is None else thetas[rng.choice(len(thetas), n_error)],
             offset=offset,
+            coils=coils,
         )
         with pm.Model():
             add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
@@ -186,7 +196,7 @@ def calibrate_record(
                 progressbar=progressbar,
             )
         stats = tree["sample_stats"]
-        simulations += 3 * n_error
+        simulations += RUNS_PER_DRAW[coils] * n_error
         simulations += int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
         thetas = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
     check, n_check = _predictive_check(tree, model, budget, executor, rng)
@@ -364,6 +374,7 @@ def record_study(
     drift: float = 0.03,
     alarm_fraction: float = 0.9,
     rounds: int = 1,
+    coils: str = "finer",
 ) -> RecordResult:
     """Calibrate a unit's log (``pymc-vcc calibrate``), or identify its charge against a
     commissioning result (``pymc-vcc leak LOG --prior``): load and check the log before any
@@ -381,7 +392,7 @@ def record_study(
         drift: sd of each nuisance parameter's change since commissioning, a fraction of its
             range.
         alarm_fraction: the alarm's threshold, a fraction of the commissioned charge.
-        rounds: as for :func:`calibrate_record`.
+        rounds, coils: as for :func:`calibrate_record`.
     """
     from pymc_vcc.io.measurements import load_log
     from pymc_vcc.plots import plot_charge_posteriors, save_figure
@@ -420,6 +431,7 @@ def record_study(
                 seed=settings.seed,
                 solver=settings.solver or "cvode",
                 rounds=rounds,
+                coils=coils,
             )
         stats = tree["sample_stats"]
         checks = predictive_checks(tree)
