@@ -33,6 +33,7 @@ from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_js
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
 from pymc_vcc.studies.unit_log import (
     CHARGE,
+    METHODS,
     RECORD_BUDGETS,
     calibrate_record,
     charge_summary,
@@ -79,7 +80,7 @@ class RealUnitsResult:
 
 
 def _calibrated(truth, executor, settings: StudySettings, budget, prior=None):
-    draws, error_draws, rounds = budget
+    draws, error_draws, rounds, method = budget
     started = time.perf_counter()
     tree = calibrate_record(
         truth.observed,
@@ -92,6 +93,7 @@ def _calibrated(truth, executor, settings: StudySettings, budget, prior=None):
         seed=settings.seed,
         solver=settings.solver or "cvode",
         coils="model" if truth.variant == "model" else "finer",
+        method=method,
     )
     return tree, {
         **charge_summary(tree),
@@ -153,10 +155,11 @@ def real_units_benchmark(
     *,
     alarm: bool = False,
     rounds: int = 1,
+    method: str = "likelihood",
 ) -> RealUnitsResult:
     """Run the benchmark (see the module docstring); ``settings.budget`` picks the particles
-    and model-error draws of each calibration (:data:`RECORD_BUDGETS`), ``rounds`` as for
-    :func:`~pymc_vcc.studies.unit_log.calibrate_record`."""
+    and model-error draws of each calibration (:data:`RECORD_BUDGETS`), ``rounds`` and
+    ``method`` as for :func:`~pymc_vcc.studies.unit_log.calibrate_record`."""
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         raise ValueError(f"unknown truth variant(s) {unknown}; allowed are {list(VARIANTS)}")
@@ -165,7 +168,9 @@ def real_units_benchmark(
     budget = settings.budget if isinstance(settings.budget, str) else "small"
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: the benchmark takes {list(RECORD_BUDGETS)}")
-    work = (*RECORD_BUDGETS[budget], rounds)
+    if method not in METHODS:
+        raise ValueError(f"method {method!r}: allowed are {list(METHODS)}")
+    work = (*RECORD_BUDGETS[budget], rounds, method)
     started = time.perf_counter()
     log = settings.checkpoint(RUNS_CHECKPOINT, ".jsonl")  # removed first unless resuming
     done: dict[tuple, dict] = {}  # rows of another budget, rounds or alarm are not reused

@@ -73,25 +73,3 @@ def test_a_second_round_draws_the_model_error_at_the_first_posterior():
     smc = int(stats["simulations"].sum())
     assert int(stats["n_simulations"]) >= smc + 2 * 3 * 12  # both rounds' model-error draws
     assert 0.9 <= float(tree["posterior"]["M0"].mean()) <= 2.2
-
-
-@pytest.mark.slow
-def test_the_models_own_data_is_calibrated_without_a_coil_offset():
-    """``coils="model"``: no offset runs, no unit charge beside the model's, two runs per
-    model-error draw; an unknown ``coils`` is refused before any simulation."""
-    from pymc_vcc.execution.executors import make_executor
-    from pymc_vcc.studies.unit_log import calibrate_record
-
-    truth = generate_truth("model", seed=5, charge=CHARGE, t_end=400.0)
-    with make_executor("processes", 2) as executor:
-        with pytest.raises(ValueError, match="coils 'coarse': allowed are"):
-            calibrate_record(truth.observed, truth.inputs, executor, coils="coarse")
-        tree = calibrate_record(
-            truth.observed, truth.inputs, executor, draws=16, error_draws=12, coils="model"
-        )
-    stats = tree["sample_stats"]
-    assert "M0_model" not in tree["posterior"] and "coil_offset_kg" not in stats
-    smc = int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
-    predictive = 16  # every particle, fewer than the check's draws
-    assert int(stats["n_simulations"]) == smc + 2 * 12 + predictive
-    assert 0.9 <= float(tree["posterior"]["M0"].mean()) <= 2.2
