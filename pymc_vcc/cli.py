@@ -72,6 +72,8 @@ def _record(args: argparse.Namespace) -> int:
         drift=args.drift,
         alarm_fraction=args.alarm_fraction,
         rounds=args.rounds,
+        coils=args.coils,
+        method=args.method,
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations, "
@@ -165,7 +167,12 @@ def _validate(args: argparse.Namespace) -> int:
         from pymc_vcc.studies.real_units import real_units_benchmark
 
         benchmark = real_units_benchmark(
-            _settings(args), args.truth, args.datasets, alarm=args.alarm, rounds=args.rounds
+            _settings(args),
+            args.truth,
+            args.datasets,
+            alarm=args.alarm,
+            rounds=args.rounds,
+            method=args.method,
         )
         text = f"{benchmark.format_table()}\n\n{benchmark.wall_seconds:.0f} s"
         return _report(args, text, benchmark.summary())
@@ -359,9 +366,31 @@ def _add_rounds_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_record_method_option(parser: argparse.ArgumentParser) -> None:
+    from pymc_vcc.studies.unit_log import METHODS as RECORD_METHODS
+
+    parser.add_argument(
+        "--method",
+        choices=list(RECORD_METHODS),
+        default="likelihood",
+        help="sampler under the error budget: likelihood (SMC, recommended) or rejection (the "
+        "paper's ABC rejection with the budget's distance) (default likelihood)",
+    )
+
+
 def _add_record_options(parser: argparse.ArgumentParser) -> None:
     """Options of the commands that read a unit's own log."""
+    from pymc_vcc.studies.record_budget import COILS
+
     _add_rounds_option(parser)
+    _add_record_method_option(parser)
+    parser.add_argument(
+        "--coils",
+        choices=list(COILS),
+        default="finer",
+        help="whose coils made the log: finer (a physical unit, the default) or model (data "
+        "this model generated: no coil offset)",
+    )
     parser.add_argument(
         "--columns",
         metavar="TOML",
@@ -432,6 +461,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         "calibrated among the nuisance parameters under the error budget",
     )
     _add_rounds_option(parser)
+    _add_record_method_option(parser)
     parser.add_argument(
         "--alarm",
         action="store_true",

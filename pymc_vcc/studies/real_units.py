@@ -3,10 +3,11 @@
 For each truth variant (:mod:`pymc_vcc.studies.truths`) and each of ``n_datasets`` seeds, a
 unit is drawn, its record generated, and the charge calibrated with
 :func:`~pymc_vcc.studies.unit_log.calibrate_record` (the charge among the nuisance parameters,
-under the error budget, uniform prior on the unit's box). Reported per variant: the mean
-absolute error of the posterior mean, the median width of the 95 % interval, the fraction of
-intervals covering the true charge, simulations and wall time per dataset, and the outputs the
-predictive check flagged.
+under the error budget, uniform prior on the unit's box; the ``model`` variant's records as
+the model's own data, the others as a physical unit's: ``coils``). Reported per variant: the
+mean absolute error of the posterior mean, the median width of the 95 % interval, the
+fraction of intervals covering the true charge, simulations and wall time per dataset, and
+the outputs the predictive check flagged.
 
 With ``alarm`` each unit is also recorded twice more, unchanged and with 20 % of its charge lost
 (same unit, other noise), and each later record is calibrated with the commissioning posterior
@@ -32,6 +33,7 @@ from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_js
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
 from pymc_vcc.studies.unit_log import (
     CHARGE,
+    METHODS,
     RECORD_BUDGETS,
     calibrate_record,
     charge_summary,
@@ -78,7 +80,7 @@ class RealUnitsResult:
 
 
 def _calibrated(truth, executor, settings: StudySettings, budget, prior=None):
-    draws, error_draws, rounds = budget
+    draws, error_draws, rounds, method = budget
     started = time.perf_counter()
     tree = calibrate_record(
         truth.observed,
@@ -90,6 +92,8 @@ def _calibrated(truth, executor, settings: StudySettings, budget, prior=None):
         rounds=rounds,
         seed=settings.seed,
         solver=settings.solver or "cvode",
+        coils="model" if truth.variant == "model" else "finer",
+        method=method,
     )
     return tree, {
         **charge_summary(tree),
@@ -151,10 +155,11 @@ def real_units_benchmark(
     *,
     alarm: bool = False,
     rounds: int = 1,
+    method: str = "likelihood",
 ) -> RealUnitsResult:
     """Run the benchmark (see the module docstring); ``settings.budget`` picks the particles
-    and model-error draws of each calibration (:data:`RECORD_BUDGETS`), ``rounds`` as for
-    :func:`~pymc_vcc.studies.unit_log.calibrate_record`."""
+    and model-error draws of each calibration (:data:`RECORD_BUDGETS`), ``rounds`` and
+    ``method`` as for :func:`~pymc_vcc.studies.unit_log.calibrate_record`."""
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         raise ValueError(f"unknown truth variant(s) {unknown}; allowed are {list(VARIANTS)}")
@@ -163,7 +168,9 @@ def real_units_benchmark(
     budget = settings.budget if isinstance(settings.budget, str) else "small"
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: the benchmark takes {list(RECORD_BUDGETS)}")
-    work = (*RECORD_BUDGETS[budget], rounds)
+    if method not in METHODS:
+        raise ValueError(f"method {method!r}: allowed are {list(METHODS)}")
+    work = (*RECORD_BUDGETS[budget], rounds, method)
     started = time.perf_counter()
     log = settings.checkpoint(RUNS_CHECKPOINT, ".jsonl")  # removed first unless resuming
     done: dict[tuple, dict] = {}  # rows of another budget, rounds or alarm are not reused

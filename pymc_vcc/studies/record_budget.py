@@ -40,6 +40,18 @@ CONTINUUM = 2.0
 coils converge to first order (the 10 → 20 difference is twice the 20 → 40 one for every output
 at 1.2 and 1.9 kg), so the continuum is 2 steps away. A unit is drawn uniformly between the
 model's own discretisation (0) and the continuum."""
+COILS: tuple[str, ...] = ("finer", "model")
+"""Whose coils made a record: ``finer``, a physical unit's (every real unit: between the
+model's and the continuum); ``model``, the model's own (synthetic data, the paper's case)."""
+RUNS_PER_DRAW = {"finer": 3, "model": 2}  # simulations of one model-error draw (ErrorPair)
+
+
+def check_coils(coils: str) -> None:
+    """Refuse a ``coils`` not in :data:`COILS`, in one line."""
+    if coils not in COILS:
+        raise ValueError(f"coils {coils!r}: allowed are {list(COILS)}")
+
+
 FIXED_SPREAD = 0.2  # a parameter held fixed is known to ±20 % of nominal unless the unit says
 ERROR_DRAWS = 96  # draws of the model-error statistics
 
@@ -147,7 +159,7 @@ def _series(run: xr.Dataset) -> np.ndarray:
 class ErrorPair:
     """Picklable: the unit's and the model's series for one draw of what is not inferred (the
     unit is the model's coils moved ``fineness`` steps toward :data:`FINE_VOLUMES`, its
-    charge ``fineness`` × :class:`CoilOffset` below the model's; 3 runs)."""
+    charge ``fineness`` × :class:`CoilOffset` below the model's; 3 runs, 2 at fineness 0)."""
 
     model: VCCSimulator
     fine_unit: Unit
@@ -157,19 +169,23 @@ class ErrorPair:
 
     def __call__(self, draw: dict) -> tuple[np.ndarray, np.ndarray] | None:
         logged = self.accuracy.shift_inputs(self.model.inputs, draw["input_errors"])
-        units = [_unit_runs(self.model, unit, logged) for unit in (self.fine_unit, self.model.unit)]
         true_parameters = {**draw["fixed"], **draw["theta"]}
-        fine_parameters = dict(true_parameters)
-        if self.offset is not None:
-            fine_parameters[CHARGE] -= float(self.offset(true_parameters[CHARGE]))
-        runs = [units[0](fine_parameters), units[1](true_parameters), self.model(draw["theta"])]
+        runs = [
+            _unit_runs(self.model, self.model.unit, logged)(true_parameters),
+            self.model(draw["theta"]),
+        ]
+        if draw["fineness"] > 0.0:
+            fine_parameters = dict(true_parameters)
+            if self.offset is not None:
+                fine_parameters[CHARGE] -= float(self.offset(true_parameters[CHARGE]))
+            runs.append(_unit_runs(self.model, self.fine_unit, logged)(fine_parameters))
         if any(run.attrs["status"] != "ok" for run in runs):
             return None
-        fine, coarse, model = (
+        coarse, model, *fine = (
             np.stack([run[name].sel(time=self.times).values for name in self.model.output_names])
             for run in runs
         )
-        unit = coarse + draw["fineness"] * (fine - coarse)
+        unit = coarse + draw["fineness"] * (fine[0] - coarse) if fine else coarse
         dt = float(np.median(np.diff(self.times)))
         return lagged(unit, draw["lags"], dt), model
 
@@ -282,12 +298,17 @@ def error_budget(
     spread: float = FIXED_SPREAD,
     thetas: np.ndarray | None = None,
     offset: CoilOffset | None = None,
+    coils: str = "finer",
 ) -> ErrorBudget:
     """The error budget of ``observed`` (outputs of ``model``, on its time grid) for a
     calibration of ``prior``'s parameters (see the module docstring); the inferred parameters
     of the model-error draws are ``thetas`` (rows in ``prior.names`` order, e.g. an earlier
     posterior's draws) or ``n_draws`` draws of the prior. With ``offset``, the model's error
-    is drawn against finer coils at the charge that reads the same (:class:`CoilOffset`)."""
+    is drawn against finer coils at the charge that reads the same (:class:`CoilOffset`);
+    ``coils`` says whose coils made the record (:data:`COILS`: with ``model`` the unit of
+    every draw has the model's coils)."""
+    check_coils(coils)
+    continuum = CONTINUUM if coils == "finer" else 0.0
     accuracy = SensorAccuracy() if accuracy is None else accuracy
     sensors = SensorBudget.of(model, observed, accuracy)
     fixed = fixed_spread(model.unit, prior.names, spread)
@@ -301,7 +322,7 @@ def error_budget(
                 for name, (_, bound) in accuracy.inputs.items()
             },
             "lags": rng.uniform(0.0, accuracy.lag, len(sensors.outputs)),
-            "fineness": float(rng.uniform(0.0, CONTINUUM)),
+            "fineness": float(rng.uniform(0.0, continuum)),
         }
         for row in thetas
     ]

@@ -7,6 +7,8 @@ read them and the inputs as they were measured.
 
 * ``model``: the inference model itself, typical white sensor noise (the idealised case);
 * ``fine``: the unit discretised finer, 20, 25 or 30 volumes per coil (model-form error);
+  every variant below has such coils too, as every real unit has, and adds one more way
+  a real unit differs:
 * ``lag``: each sensor a first-order lag of 5-30 s (a strap-on pipe sensor);
 * ``bias``: each sensor off by a constant within its accuracy class (±0.5 K, ±1 % of the
   pressure reading, ±2 % of the mass flow);
@@ -144,7 +146,7 @@ def generate_truth(
     truth_params = drifted_parameters(unit, rng) if every or variant == "drift" else {}
     truth_params |= dict(parameters or {})
     truth_params["M0"] = charge
-    drawn = int(rng.choice(FINE_VOLUMES)) if every or variant == "fine" else None
+    drawn = None if variant == "model" else int(rng.choice(FINE_VOLUMES))
     n_volumes = n_volumes or drawn or unit.discretisation.n_volumes
     true_unit = unit.with_changes(discretisation={"n_volumes": n_volumes})
     true_inputs = window(builtin_inputs() if inputs is None else inputs, t_end)

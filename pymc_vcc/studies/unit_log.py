@@ -30,6 +30,7 @@ import pymc as pm
 import xarray as xr
 
 from pymc_vcc.execution.executors import Executor
+from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.error_model import (
     ErrorBudget,
     SensorAccuracy,
@@ -39,6 +40,7 @@ from pymc_vcc.inference.error_model import (
 from pymc_vcc.inference.priors import Prior, UniformPrior
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import OUTPUT_INTERVAL, VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
@@ -46,8 +48,10 @@ from pymc_vcc.studies.record_budget import (
     CHARGE,
     ERROR_DRAWS,
     FINE_VOLUMES,
+    RUNS_PER_DRAW,
     CoilOffset,
     SensorBudget,
+    check_coils,
     coil_offset,
     error_budget,
     held_inputs,
@@ -78,6 +82,14 @@ RECORD_BUDGETS: dict[str, tuple[int, int]] = {
 }
 """Budget name -> (SMC particles, model-error draws) of a record's calibration."""
 
+METHODS: tuple[str, ...] = ("likelihood", "rejection")
+"""How a record's posterior is sampled under its error budget: ``likelihood``, SMC on the
+budget's likelihood (recommended); ``rejection``, the paper's ABC rejection with the budget's
+Mahalanobis distance (:meth:`~pymc_vcc.inference.error_model.ErrorBudget.distance`)."""
+REJECTION_PILOT = 10  # pilot draws of a rejection calibration per SMC particle of the budget
+REJECTION_MAIN = 30  # main-phase draws per SMC particle (about 5 % accepted)
+REJECTION_QUANTILE = 0.05
+
 PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
 PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in sample_stats
 
@@ -104,6 +116,8 @@ def calibrate_record(
     solver: str | Solver = "cvode",
     progressbar: bool = False,
     rounds: int = 1,
+    coils: str = "finer",
+    method: str = "likelihood",
 ) -> xr.DataTree:
     """The posterior of ``parameters`` given a record of a real unit.
 
@@ -125,11 +139,19 @@ def calibrate_record(
             previous posterior's draws (local rather than over the whole prior); the rounds
             before the last scout with :data:`SCOUTING_SHARE` of the particles and draws.
         progressbar: show PyMC's progress bar.
+        coils: whose coils made the record
+            (:data:`~pymc_vcc.studies.record_budget.COILS`): ``finer`` for a physical unit
+            (the default: every real unit), ``model`` for data the model itself generated
+            (then no coil offset, and the model-error draws keep the model's coils).
+        method: the sampler under the error budget (:data:`METHODS`); ``draws`` sets the
+            rejection's budget too (:data:`REJECTION_PILOT`, :data:`REJECTION_MAIN` per
+            particle).
 
     Returns:
-        The ArviZ DataTree. When the charge is inferred, ``posterior`` holds the unit's
-        charge in ``M0`` and the model's equivalent charge in ``M0_model`` (they differ by the
-        coils' offset, :class:`~pymc_vcc.studies.record_budget.CoilOffset`, measured first:
+        The ArviZ DataTree. When the charge is inferred from a unit's record (``coils``
+        ``finer``), ``posterior`` holds the unit's charge in ``M0`` and the model's
+        equivalent charge in ``M0_model`` (they differ by the coils' offset,
+        :class:`~pymc_vcc.studies.record_budget.CoilOffset`, measured first:
         ``coil_offset_kg`` in ``sample_stats``). ``sample_stats`` also holds the predictive
         check per output (``ppc_z_mean``, ``ppc_p_value``, ``ppc_misfit``), the last error
         budget's size (``error_draws``, ``error_failed``, ``error_rounds``) and every
@@ -139,6 +161,9 @@ def calibrate_record(
     prior = box_prior(unit, parameters) if prior is None else prior
     if rounds < 1:
         raise ValueError(f"rounds must be at least 1, got {rounds}")
+    check_coils(coils)
+    if method not in METHODS:
+        raise ValueError(f"method {method!r}: allowed are {list(METHODS)}")
     rng = np.random.default_rng(seed)
     t_end = float(observed["time"].values[-1])
     model = VCCSimulator(
@@ -152,7 +177,7 @@ def calibrate_record(
     )
     accuracy = SensorAccuracy() if accuracy is None else accuracy
     thetas, simulations, offset = None, 0, None
-    if CHARGE in prior.names:
+    if CHARGE in prior.names and coils == "finer":
         sensors = SensorBudget.of(model, observed, accuracy)
         spec = unit.parameters[CHARGE]
         offset, simulations = coil_offset(
@@ -176,18 +201,13 @@ def calibrate_record(
             n_draws=n_error,
             thetas=None if thetas is None else thetas[rng.choice(len(thetas), n_error)],
             offset=offset,
+            coils=coils,
         )
-        with pm.Model():
-            add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
-            tree = sample_smc_abc(
-                max(MIN_PARTICLES, round(share * draws)),
-                executor=executor,
-                random_seed=seed,
-                progressbar=progressbar,
-            )
-        stats = tree["sample_stats"]
-        simulations += 3 * n_error
-        simulations += int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
+        particles = max(MIN_PARTICLES, round(share * draws))
+        tree, n_sampled = _sample(
+            method, model, observed, budget, prior, particles, executor, seed, progressbar
+        )
+        simulations += RUNS_PER_DRAW[coils] * n_error + n_sampled
         thetas = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
     check, n_check = _predictive_check(tree, model, budget, executor, rng)
     stats = tree["sample_stats"].to_dataset()
@@ -218,6 +238,40 @@ def calibrate_record(
             stacklevel=2,
         )
     return tree
+
+
+def _sample(
+    method: str,
+    model: VCCSimulator,
+    observed: xr.Dataset,
+    budget: ErrorBudget,
+    prior: Prior,
+    particles: int,
+    executor: Executor,
+    seed: int,
+    progressbar: bool,
+) -> tuple[xr.DataTree, int]:
+    """The posterior under ``budget`` by ``method``, and its simulations."""
+    if method == "rejection":
+        tree = abc_rejection(
+            model,
+            prior,
+            observed,
+            n_pilot=REJECTION_PILOT * particles,
+            quantile=REJECTION_QUANTILE,
+            n_main=REJECTION_MAIN * particles,
+            n_desired=REJECTION_MAIN * particles,
+            distance=budget.distance,
+            run=RunOptions(executor=executor, seed=seed, progress=progressbar),
+        )
+        return tree, int(tree["sample_stats"]["n_simulations"])
+    with pm.Model():
+        add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
+        tree = sample_smc_abc(
+            particles, executor=executor, random_seed=seed, progressbar=progressbar
+        )
+    stats = tree["sample_stats"]
+    return tree, int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
 
 
 def _to_unit_charge(tree: xr.DataTree, offset: CoilOffset, rng: np.random.Generator) -> None:
@@ -364,6 +418,8 @@ def record_study(
     drift: float = 0.03,
     alarm_fraction: float = 0.9,
     rounds: int = 1,
+    coils: str = "finer",
+    method: str = "likelihood",
 ) -> RecordResult:
     """Calibrate a unit's log (``pymc-vcc calibrate``), or identify its charge against a
     commissioning result (``pymc-vcc leak LOG --prior``): load and check the log before any
@@ -381,7 +437,7 @@ def record_study(
         drift: sd of each nuisance parameter's change since commissioning, a fraction of its
             range.
         alarm_fraction: the alarm's threshold, a fraction of the commissioned charge.
-        rounds: as for :func:`calibrate_record`.
+        rounds, coils, method: as for :func:`calibrate_record`.
     """
     from pymc_vcc.io.measurements import load_log
     from pymc_vcc.plots import plot_charge_posteriors, save_figure
@@ -420,6 +476,8 @@ def record_study(
                 seed=settings.seed,
                 solver=settings.solver or "cvode",
                 rounds=rounds,
+                coils=coils,
+                method=method,
             )
         stats = tree["sample_stats"]
         checks = predictive_checks(tree)

@@ -87,6 +87,24 @@ def test_log_likelihood_is_the_gaussian_of_the_summaries():
     assert budget.log_likelihood(np.full((2, TIMES.size), np.nan)) == -np.inf
 
 
+def test_the_budgets_distance_makes_abc_kernel_its_likelihood():
+    """At ε = 1 the ABC Gaussian kernel of the budget's distance is the budget's likelihood
+    up to a constant, for every simulation; a failed simulation is infinitely far."""
+    windows = plateau_windows(EDGES, TIMES, skip=60.0)
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(6, 6))
+    cov = a @ a.T + 6 * np.eye(6)
+    record = rng.normal(size=(2, TIMES.size))
+    budget = _budget(summarise(record, windows), rng.normal(size=6), cov, windows)
+    sims = rng.normal(size=(5, 2, TIMES.size))
+    sims[4, 1, 200] = np.nan
+    d = budget.distance(sims, record)
+    assert d.shape == (5,) and d[4] == np.inf and np.isfinite(d[:4]).all()
+    gap = [budget.log_likelihood(sim) + 0.5 * dk**2 for sim, dk in zip(sims[:4], d, strict=False)]
+    assert np.ptp(gap) < 1e-9 * abs(gap[0])
+    assert budget.distance(sims[:1], record)[0] == pytest.approx(d[0])  # one at a time alike
+
+
 def _pair(draw):
     """A 'unit' offset by 1 from its 'model', plus the draw's scatter; draw 3 fails."""
     if draw == 3:

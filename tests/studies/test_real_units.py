@@ -23,7 +23,8 @@ def test_validate_truth_runs_the_benchmark_and_resumes(tmp_path, capsys):
         for line in (out / "checkpoints" / "validate-real-units.jsonl").read_text().splitlines()
     ]
     assert row["variant"] == "lag" and 1.0 <= row["truth_kg"] <= 2.1
-    assert row["work"] == [24, 12, 1]  # particles, model-error draws, rounds: resume keys on it
+    # particles, model-error draws, rounds, method: resume keys on it
+    assert row["work"] == [24, 12, 1, "likelihood"]
     assert row["low_kg"] <= row["mean_kg"] <= row["high_kg"]
     assert row["covers"] == (row["low_kg"] <= row["truth_kg"] <= row["high_kg"])
     assert main([*arguments, "--out", str(out), "--resume", "--json"]) == 0

@@ -18,7 +18,7 @@ def truths():
 def test_each_variant_differs_as_it_says(truths):
     model, unit = truths["model"], load_unit()
     assert model.n_volumes == 10 and not model.lags and not model.biases
-    assert truths["fine"].n_volumes in FINE_VOLUMES
+    assert all(t.n_volumes in FINE_VOLUMES for v, t in truths.items() if v != "model")
     # a finer condenser holds its pressure differently: far beyond the noise (0.5 %)
     pd_gap = abs(float(truths["fine"].observed["PD"].mean() - model.observed["PD"].mean()))
     assert pd_gap > 5e3
@@ -37,7 +37,7 @@ def test_each_variant_differs_as_it_says(truths):
     )
     assert drifted != {spec.id: spec.nominal for spec in unit.parameters}
     everything = truths["all"]
-    assert everything.lags and everything.biases and everything.n_volumes in FINE_VOLUMES
+    assert everything.lags and everything.biases
     assert all(t.charge == CHARGE for t in truths.values())
 
 

@@ -1,0 +1,48 @@
+"""A record's calibration: whose coils made it, and the sampler under its error budget."""
+
+import pytest
+
+from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.studies.truths import generate_truth
+from pymc_vcc.studies.unit_log import REJECTION_MAIN, REJECTION_PILOT, calibrate_record
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return generate_truth("model", seed=5, charge=1.4, t_end=400.0)
+
+
+def test_unknown_coils_or_method_are_refused_before_any_simulation(truth):
+    for wrong, message in (({"coils": "coarse"}, "coils 'coarse': allowed are"),
+                           ({"method": "mcmc"}, "method 'mcmc': allowed are")):  # fmt: skip
+        with pytest.raises(ValueError, match=message):
+            calibrate_record(truth.observed, truth.inputs, None, **wrong)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["likelihood", "rejection"])
+def test_the_models_own_data_is_calibrated_without_a_coil_offset(truth, method):
+    """``coils="model"``: no offset runs, no unit charge beside the model's, two runs per
+    model-error draw; every simulation counted, by either sampler."""
+    with make_executor("processes", 2) as executor:
+        tree = calibrate_record(
+            truth.observed,
+            truth.inputs,
+            executor,
+            draws=16,
+            error_draws=12,
+            coils="model",
+            method=method,
+            seed=3,
+        )
+    stats = tree["sample_stats"]
+    assert "M0_model" not in tree["posterior"] and "coil_offset_kg" not in stats
+    if method == "likelihood":
+        sampled = int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
+    else:
+        sampled = 16 * (REJECTION_PILOT + REJECTION_MAIN)  # the main phase runs to its end
+    n_posterior = tree["posterior"]["M0"].size
+    predictive = min(24, n_posterior)
+    assert int(stats["n_simulations"]) == sampled + 2 * 12 + predictive
+    charge = tree["posterior"]["M0"]
+    assert 0.9 <= float(charge.min()) < float(charge.max()) <= 2.2  # accuracy: the benchmark
