@@ -69,6 +69,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "validation_study",
     ),
     "pymc_vcc.studies.unit_log": ("calibrate_record", "record_study"),
+    "pymc_vcc.studies.diagnose": ("diagnose",),
     "pymc_vcc.studies.truths": ("generate_truth",),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}

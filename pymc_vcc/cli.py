@@ -85,6 +85,28 @@ def _record(args: argparse.Namespace) -> int:
     return _report(args, text, result.summary())
 
 
+def _diagnose(args: argparse.Namespace) -> int:
+    """``diagnose LOG --prior COMMISSIONING``: the unit's faults since commissioning."""
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.diagnose import diagnose_study
+
+    result = diagnose_study(
+        _settings(args),
+        args.log,
+        args.prior,
+        column_map=args.columns,
+        unit=load_unit(args.unit) if args.unit else None,
+        drift=args.drift,
+        coils=args.coils,
+        rounds=args.rounds,
+        method=args.method,
+    )
+    n_simulations = int(result.tree["sample_stats"]["n_simulations"])
+    return _report(
+        args, f"{result.format_table()}\n\n{n_simulations} simulations", result.summary()
+    )
+
+
 def _leak(args: argparse.Namespace) -> int:
     if getattr(args, "log", None) is not None:  # demo runs the leak study without a log
         return _record(args)
@@ -591,6 +613,22 @@ def build_parser() -> argparse.ArgumentParser:
     _add_leak_options(leak)
     _add_record_options(leak)
     leak.set_defaults(handler=_leak)
+
+    diagnose = commands.add_parser(
+        "diagnose",
+        help="the faults of a unit's LOG since its commissioning (--prior): each fault's "
+        "intensity and probability, and a verdict",
+    )
+    diagnose.add_argument("log", metavar="LOG", help="a CSV log of the unit")
+    diagnose.add_argument(
+        "--prior",
+        metavar="COMMISSIONING",
+        required=True,
+        help="the folder (or posterior.nc) written by `pymc-vcc calibrate` at commissioning",
+    )
+    _add_study_options(diagnose, "results/diagnose", "small")
+    _add_record_options(diagnose)
+    diagnose.set_defaults(handler=_diagnose)
 
     calibrate = commands.add_parser(
         "calibrate",

@@ -95,10 +95,9 @@ PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in
 
 
 def box_prior(unit: Unit, parameters: Sequence[str]) -> UniformPrior:
-    """Uniform on the unit's bounds of ``parameters``."""
-    return UniformPrior(
-        {pid: (unit.parameters[pid].low, unit.parameters[pid].high) for pid in parameters}
-    )
+    """Uniform on the unit's bounds of ``parameters`` (calibration or fault parameters)."""
+    specs = map(unit.parameter_spec, parameters)
+    return UniformPrior({spec.id: (spec.low, spec.high) for spec in specs})
 
 
 def calibrate_record(
@@ -385,27 +384,43 @@ class RecordResult:
 
 
 def commissioning_prior(
-    posterior: xr.DataTree, unit: Unit, drift: float, seed: int
+    posterior: xr.DataTree,
+    unit: Unit,
+    drift: float,
+    seed: int,
+    *,
+    free: Sequence[str] = (CHARGE,),
+    added: Sequence[str] = (),
 ) -> tuple[Prior, float]:
-    """The prior of a later record from a commissioning posterior: its nuisance parameters as
-    they were (a Gaussian mixture, each draw moved by ``drift`` × the range), the charge
-    uniform on its bounds (a leak may have moved it anywhere); and the commissioned charge."""
+    """The prior of a later record from a commissioning posterior: its parameters as they were
+    (a Gaussian mixture, each draw moved by ``drift`` × the range), those in ``free`` uniform
+    on their bounds (a leak may have moved the charge anywhere), ``added`` ones (not
+    calibrated at commissioning, e.g. fault parameters) uniform on theirs; and the
+    commissioned charge, kg."""
     from pymc_vcc.inference.priors import GMMPrior
 
     names = [str(n) for n in posterior["posterior"].data_vars if n in unit.parameters.ids]
     if CHARGE not in names:
         raise ValueError(f"the commissioning posterior has no {CHARGE}; it has {names}")
-    samples = np.column_stack([posterior["posterior"][n].values.ravel() for n in names])
-    commissioned = float(samples[:, names.index(CHARGE)].mean())
+    samples = {n: posterior["posterior"][n].values.ravel() for n in names}
+    commissioned = float(samples[CHARGE].mean())
     rng = np.random.default_rng(seed)
-    spec = unit.parameters[CHARGE]
-    samples[:, names.index(CHARGE)] = rng.uniform(spec.low, spec.high, len(samples))
-    box = box_prior(unit, names)
-    nuisance_drift = {name: (0.0 if name == CHARGE else drift) for name in names}
-    prior = GMMPrior.fit(
-        dict(zip(names, samples.T, strict=True)), box, seed=seed, drift=nuisance_drift
-    )
+    uniform = [*free, *(n for n in added if n not in names)]
+    for name in uniform:
+        spec = unit.parameter_spec(name)
+        samples[name] = rng.uniform(spec.low, spec.high, len(samples[CHARGE]))
+    moved = {name: (0.0 if name in uniform else drift) for name in samples}
+    prior = GMMPrior.fit(samples, box_prior(unit, list(samples)), seed=seed, drift=moved)
     return prior, commissioned
+
+
+def load_commissioning(path: str | Path) -> xr.DataTree:
+    """The posterior a calibration wrote (its folder, or its ``posterior.nc``)."""
+    path = Path(path)
+    path = path / POSTERIOR_FILE if path.is_dir() else path
+    if not path.is_file():
+        raise FileNotFoundError(f"no commissioning posterior at {path}")
+    return xr.open_datatree(path, engine="h5netcdf")
 
 
 def record_study(
@@ -455,12 +470,8 @@ def record_study(
     measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
     prior, commissioned = None, None
     if commissioning is not None:
-        path = Path(commissioning)
-        path = path / POSTERIOR_FILE if path.is_dir() else path
-        if not path.is_file():
-            raise FileNotFoundError(f"no commissioning posterior at {path}")
         prior, commissioned = commissioning_prior(
-            xr.open_datatree(path, engine="h5netcdf"), unit, drift, settings.seed
+            load_commissioning(commissioning), unit, drift, settings.seed
         )
     draws, error_draws = RECORD_BUDGETS[budget]
     with settings.claim_output("calibrate" if commissioning is None else "leak"):

@@ -1,4 +1,5 @@
-"""A unit's own log through the command line: calibrate at commissioning, then the leak check."""
+"""A unit's own log through the command line: calibrate at commissioning, then the leak check
+and the fault diagnosis."""
 
 import json
 import shutil
@@ -38,6 +39,19 @@ def test_calibrate_then_leak_on_the_shipped_example_log(tmp_path, capsys):
         summary["charge"]["low_kg"] <= summary["charge"]["mean_kg"] <= summary["charge"]["high_kg"]
     )
     assert summary["n_simulations"] > 0
+
+    diagnosed = tmp_path / "diagnosed"
+    code = main(["diagnose", log, "--prior", str(commissioning), "--budget", "smoke", "--out",
+                 str(diagnosed)])  # fmt: skip
+    assert code == 0
+    report = capsys.readouterr().out
+    assert report.startswith("verdict: ") and "non-condensable gas" in report
+    for name in ("posterior.nc", "summary.json", "report.txt", "faults.png"):
+        assert (diagnosed / name).is_file(), name
+    faults = json.loads((diagnosed / "summary.json").read_text())["faults"]
+    assert len(faults) == 7 and all(0.0 <= f["probability"] <= 1.0 for f in faults.values())
+    posterior = xr.open_datatree(diagnosed / "posterior.nc", engine="h5netcdf")["posterior"]
+    assert {"DP_RESTR", "P_NCG", "M0", "FO_FLOW"} <= set(posterior.data_vars)
 
 
 def test_a_bad_log_is_refused_in_one_line_before_any_simulation(tmp_path, capsys):

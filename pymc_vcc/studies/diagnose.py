@@ -1,0 +1,409 @@
+"""Fault diagnosis: which fault, how severe, how sure, from a unit's later log.
+
+A later record is calibrated (:func:`~pymc_vcc.studies.unit_log.calibrate_record`, the same
+error budget) with the commissioning posterior as prior, every parameter a fault moves left
+free (uniform on its bounds) and the cycle's fault parameters (``unit.faults``: a liquid-line
+restriction, non-condensable gas) added. Each fault of :data:`FAULTS` is then an *intensity*
+relative to commissioning, per posterior draw: a fraction of the commissioned value for the
+faults that move a calibration parameter (the charge, the condenser's air side, the indoor
+airflow, the compressor's volumetric efficiency), the fault parameter itself for the others.
+Its posterior probability of lying beyond the fault's threshold names it
+(:data:`NAMED`); two faults that together are likely but neither alone are reported as not
+distinguishable, with the sensor that would tell them apart (:func:`separating_sensor`).
+
+The faults are the standard set of the fault-detection literature (Yuill and Braun's
+evaluation of FDD protocols; ASHRAE RP-1043): undercharge, overcharge, condenser fouling or low
+outdoor airflow, low indoor airflow, liquid-line restriction, compressor valve leakage,
+non-condensable gas.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from pymc_vcc.execution.executors import Executor
+from pymc_vcc.inference.error_model import SensorAccuracy, plateau_windows, summarise
+from pymc_vcc.physics.integration.solver import Solver
+from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.unit import Unit, load_unit
+from pymc_vcc.studies.record_budget import CHARGE, held_inputs, plateau_edges
+from pymc_vcc.studies.unit_log import (
+    RECORD_BUDGETS,
+    SETTLE,
+    calibrate_record,
+    commissioning_prior,
+)
+
+
+@dataclass(frozen=True)
+class Fault:
+    """One fault of the standard set, as the model sees it.
+
+    Attributes:
+        name: what a service engineer calls it.
+        parameters: the parameters it moves (its intensity is the largest of theirs).
+        direction: −1 if the fault lowers them, +1 if it raises them.
+        threshold: the smallest intensity that counts as the fault.
+        relative: intensity as a fraction of the commissioned value (else in the parameter's
+            own unit, from 0: a fault parameter is 0 on a healthy unit).
+        display: (unit, factor) of the intensity in the report (``("%", 100)``, ...).
+    """
+
+    name: str
+    parameters: tuple[str, ...]
+    direction: int
+    threshold: float
+    relative: bool = True
+    display: tuple[str, float] = ("%", 100.0)
+
+    def intensity(self, draws: Mapping[str, np.ndarray], commissioned: Mapping[str, float]):
+        """The fault's intensity per posterior draw (``draws``: parameter -> values)."""
+        moves = []
+        for pid in self.parameters:
+            if self.relative:
+                moves.append(self.direction * (draws[pid] / commissioned[pid] - 1.0))
+            else:
+                moves.append(self.direction * draws[pid])
+        return np.max(moves, axis=0)
+
+
+FAULTS: tuple[Fault, ...] = (
+    Fault("undercharge", (CHARGE,), -1, 0.10),
+    Fault("overcharge", (CHARGE,), +1, 0.10),
+    Fault("condenser fouling or low outdoor airflow", ("HTC_CA", "FO_FLOW"), -1, 0.20),
+    Fault("low indoor airflow", ("FI_FLOW",), -1, 0.20),
+    Fault("compressor valve leakage", ("CF_VOL",), -1, 0.10),
+    Fault("liquid-line restriction", ("DP_RESTR",), +1, 50e3, False, ("kPa", 1e-3)),
+    Fault("non-condensable gas", ("P_NCG",), +1, 30e3, False, ("kPa", 1e-3)),
+)
+"""The standard faults and their detection thresholds: charge ±10 % (the field's tolerance),
+airflow or air-side conductance −20 %, volumetric efficiency −10 %, a restriction of 50 kPa at
+the rated flow, 30 kPa of non-condensable gas (about 1 K of condensing temperature)."""
+
+NAMED = 0.9  # a fault is named when P(intensity beyond its threshold) is at least this
+POSSIBLE = 0.5  # below NAMED and at least this: reported as possible
+
+
+def _free_parameters(unit: Unit) -> list[str]:
+    """The calibration parameters a fault moves (left free of the commissioning posterior)."""
+    return [
+        pid
+        for fault in FAULTS
+        if fault.relative
+        for pid in fault.parameters
+        if pid in unit.parameters.ids
+    ]
+
+
+@dataclass
+class Diagnosis:
+    """What a later record says of the unit's faults.
+
+    Attributes:
+        tree: the posterior DataTree of the later record (intensities in ``posterior`` as
+            ``fault_<k>``).
+        intensities: fault name -> its posterior draws of intensity.
+        probabilities: fault name -> P(intensity beyond its threshold).
+        verdict: ``no fault``, ``<fault>``, ``several: ...`` or ``<fault> or <fault>: not
+            distinguishable with these sensors``.
+        confusions: pairs of faults the data cannot separate, each with the sensor (output
+            id) that would.
+        commissioned: the commissioning posterior's mean of each parameter.
+    """
+
+    tree: xr.DataTree
+    intensities: dict[str, np.ndarray]
+    probabilities: dict[str, float]
+    verdict: str
+    confusions: list[tuple[str, str, str]] = field(default_factory=list)
+    commissioned: dict[str, float] = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        """The JSON summary: per fault its intensity (mean, 95 % interval) and probability."""
+        faults = {}
+        for fault in FAULTS:
+            draws = self.intensities[fault.name]
+            low, high = np.quantile(draws, [0.025, 0.975])
+            faults[fault.name] = {
+                "intensity_mean": float(draws.mean()),
+                "intensity_low": float(low),
+                "intensity_high": float(high),
+                "probability": self.probabilities[fault.name],
+                "threshold": fault.threshold,
+                "relative": fault.relative,
+            }
+        charge = self.tree["posterior"][CHARGE].values.ravel()
+        return {
+            "verdict": self.verdict,
+            "faults": faults,
+            "confusions": [list(c) for c in self.confusions],
+            "charge_change_kg": float(charge.mean() - self.commissioned[CHARGE]),
+        }
+
+    def format_table(self) -> str:
+        """The one-page report: the verdict, then every fault's intensity and probability."""
+        charge = self.tree["posterior"][CHARGE].values.ravel() - self.commissioned[CHARGE]
+        low, high = np.quantile(charge, [0.025, 0.975])
+        lines = [
+            f"verdict: {self.verdict}",
+            f"charge change since commissioning: {charge.mean():+.3f} kg "
+            f"(95 % interval {low:+.3f} to {high:+.3f} kg)",
+            "",
+            f"{'fault':<42} {'intensity (95 % interval)':>32}  {'threshold':>10}  P(fault)",
+        ]
+        for fault in FAULTS:
+            unit, factor = fault.display
+            draws = self.intensities[fault.name] * factor
+            q_low, q_high = np.quantile(draws, [0.025, 0.975])
+            interval = f"{draws.mean():+.1f} ({q_low:+.1f} to {q_high:+.1f}) {unit}"
+            lines.append(
+                f"{fault.name:<42} {interval:>32}  {fault.threshold * factor:>7.0f} {unit:<3}"
+                f"{self.probabilities[fault.name]:8.2f}"
+            )
+        for first, second, sensor in self.confusions:
+            lines.append(
+                f"\n{first} and {second} are not distinguishable with these sensors; a {sensor} "
+                "sensor would tell them apart"
+            )
+        return "\n".join(lines)
+
+
+def verdict(probabilities: Mapping[str, float]) -> tuple[str, list[tuple[str, str]]]:
+    """The verdict from each fault's probability, and the pairs it could not separate: two
+    faults neither of which reaches :data:`NAMED` but whose probabilities together do."""
+    named = [name for name, p in probabilities.items() if p >= NAMED]
+    if len(named) > 1:
+        return "several: " + ", ".join(named), []
+    if len(named) == 1:
+        return named[0], []
+    pairs = [
+        (a, b)
+        for a, b in itertools.combinations(probabilities, 2)
+        if probabilities[a] >= 1 - NAMED
+        and probabilities[b] >= 1 - NAMED
+        and probabilities[a] + probabilities[b] >= NAMED
+    ]
+    if pairs:
+        a, b = max(pairs, key=lambda pair: probabilities[pair[0]] + probabilities[pair[1]])
+        return f"{a} or {b}: not distinguishable with these sensors", [(a, b)]
+    possible = [name for name, p in probabilities.items() if p >= POSSIBLE]
+    if possible:
+        return "no fault named; possible: " + ", ".join(possible), []
+    return "no fault", []
+
+
+def separating_sensor(
+    model: VCCSimulator,
+    point: Mapping[str, float],
+    faults: tuple[Fault, Fault],
+    logged: Sequence[str],
+    accuracy: SensorAccuracy,
+) -> str:
+    """The output (of every one the cycle has) whose plateau readings differ most, in units of
+    its sensor's accuracy, between the two faults each at its threshold from ``point``, once
+    the second fault's size is matched to the first on the ``logged`` outputs."""
+    outputs = list(model.unit.cycle_model.outputs.output_ids)
+    everything = VCCSimulator(
+        model.unit,
+        model.inputs,
+        outputs=outputs,
+        t_window=model.t_window,
+        solver=model.solver,
+        settle=model.settle,
+    )
+    runs = [everything(dict(point))]
+    for fault in faults:
+        step = fault.direction * fault.threshold
+        moved = {
+            pid: point[pid] * (1 + step) if fault.relative else step for pid in fault.parameters
+        }
+        runs.append(everything({**point, **moved}))
+    if any(run.attrs["status"] != "ok" for run in runs):
+        return "(none found: the model failed near the posterior mean)"
+    times = runs[0]["time"].values
+    windows = plateau_windows(plateau_edges(model.inputs) - model.t_window[0], times)
+    base, *moved_runs = (
+        summarise(np.stack([run[o].values for o in outputs]), windows).reshape(len(outputs), -1)
+        for run in runs
+    )
+    scale = []
+    for j, name in enumerate(outputs):
+        bound, relative = accuracy.bias_bound(runs[0][name].attrs["units"])
+        scale.append(bound * float(np.abs(base[j]).mean()) if relative else bound)
+    first, second = ((r - base) / np.array(scale)[:, None] for r in moved_runs)
+    seen = [outputs.index(o) for o in logged if o in outputs]
+    a, b = first[seen].ravel(), second[seen].ravel()
+    match = float(a @ b / (b @ b)) if b @ b > 0 else 0.0
+    gap = np.abs(first - match * second).max(axis=1)
+    return outputs[int(np.argmax(gap))]
+
+
+def diagnose(
+    observed: xr.Dataset,
+    inputs: xr.Dataset,
+    commissioning: xr.DataTree,
+    executor: Executor,
+    *,
+    unit: Unit | None = None,
+    drift: float = 0.03,
+    budget: str = "small",
+    seed: int = 0,
+    solver: str | Solver = "cvode",
+    coils: str = "finer",
+    rounds: int = 1,
+    method: str = "likelihood",
+    accuracy: SensorAccuracy | None = None,
+) -> Diagnosis:
+    """Diagnose a later record of a unit against its commissioning posterior.
+
+    Args:
+        observed: the later record's outputs (SI, ``units`` attrs) on a regular grid from 0 s.
+        inputs: its logged inputs.
+        commissioning: the commissioning posterior (``pymc-vcc calibrate``'s
+            ``posterior.nc``).
+        executor: runs the simulations.
+        unit: the unit description (default: the built-in split unit).
+        drift: sd of each parameter no fault moves, since commissioning, a fraction of its
+            range.
+        budget: :data:`~pymc_vcc.studies.unit_log.RECORD_BUDGETS` name.
+        seed: seeds every random draw.
+        solver: ODE solver.
+        coils, rounds, method: as for :func:`~pymc_vcc.studies.unit_log.calibrate_record`.
+        accuracy: the sensors' accuracy.
+    """
+    unit = load_unit() if unit is None else unit
+    if budget not in RECORD_BUDGETS:
+        raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
+    missing = [pid for f in FAULTS for pid in f.parameters if pid not in unit.parameters.ids]
+    missing = [pid for pid in missing if pid not in unit.faults.ids]
+    if missing:
+        raise ValueError(
+            f"the unit's cycle lacks the fault parameter(s) {missing} the diagnosis needs"
+        )
+    accuracy = SensorAccuracy() if accuracy is None else accuracy
+    posterior = commissioning["posterior"]
+    commissioned = {
+        str(n): float(posterior[n].mean()) for n in posterior.data_vars if n in unit.parameters.ids
+    }
+    absent = [pid for pid in (CHARGE, *_free_parameters(unit)) if pid not in commissioned]
+    if absent:
+        raise ValueError(
+            f"the commissioning posterior lacks {absent}; calibrate the healthy unit with "
+            "`pymc-vcc calibrate` (the charge and its nuisance parameters)"
+        )
+    prior, _ = commissioning_prior(
+        commissioning,
+        unit,
+        drift,
+        seed,
+        free=[CHARGE, *_free_parameters(unit)],
+        added=unit.faults.ids,
+    )
+    draws, error_draws = RECORD_BUDGETS[budget]
+    tree = calibrate_record(
+        observed,
+        inputs,
+        executor,
+        unit=unit,
+        prior=prior,
+        parameters=prior.names,
+        draws=draws,
+        error_draws=error_draws,
+        seed=seed,
+        solver=solver,
+        coils=coils,
+        rounds=rounds,
+        method=method,
+        accuracy=accuracy,
+    )
+    samples = {str(n): tree["posterior"][n].values.ravel() for n in tree["posterior"].data_vars}
+    intensities = {f.name: f.intensity(samples, commissioned) for f in FAULTS}
+    probabilities = {f.name: float(np.mean(intensities[f.name] >= f.threshold)) for f in FAULTS}
+    text, pairs = verdict(probabilities)
+    by_name = {f.name: f for f in FAULTS}
+    point = {name: float(values.mean()) for name, values in samples.items()}
+    point[CHARGE] = point.get(f"{CHARGE}_model", point[CHARGE])  # the model's own charge
+    point = {k: v for k, v in point.items() if k in prior.names}
+    model = VCCSimulator(
+        unit,
+        held_inputs(inputs),
+        outputs=[str(n) for n in observed.data_vars],
+        t_window=(0.0, float(observed["time"].values[-1])),
+        solver=solver,
+        settle=SETTLE,
+    )
+    confusions = [
+        (a, b, separating_sensor(
+            model, point, (by_name[a], by_name[b]), list(model.output_names), accuracy,
+        ))
+        for a, b in pairs
+    ]  # fmt: skip
+    return Diagnosis(tree, intensities, probabilities, text, confusions, commissioned)
+
+
+def diagnose_study(
+    settings,
+    log: str,
+    commissioning: str,
+    *,
+    column_map: str | None = None,
+    unit: Unit | None = None,
+    drift: float = 0.03,
+    coils: str = "finer",
+    rounds: int = 1,
+    method: str = "likelihood",
+) -> Diagnosis:
+    """``pymc-vcc diagnose LOG --prior COMMISSIONING``: load and check the log and the
+    commissioning posterior before any simulation, diagnose, and write the posterior, the
+    report, the summary and the intensities' figure into ``settings.out``."""
+    from pymc_vcc.io.measurements import load_log
+    from pymc_vcc.physics.simulate import OUTPUT_INTERVAL
+    from pymc_vcc.plots import plot_fault_intensities, save_figure
+    from pymc_vcc.studies.common import write_json, write_netcdf, write_text
+    from pymc_vcc.studies.unit_log import POSTERIOR_FILE, load_commissioning
+
+    if not 0.0 <= drift <= 1.0:
+        raise ValueError(f"drift must lie in [0, 1] (a fraction of each range), got {drift}")
+    budget = settings.budget if isinstance(settings.budget, str) else "small"
+    if budget not in RECORD_BUDGETS:
+        raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
+    unit = unit or load_unit()
+    measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
+    healthy = load_commissioning(commissioning)
+    with settings.claim_output("diagnose"), settings.open_executor() as executor:
+        result = diagnose(
+            measured.observed,
+            measured.inputs,
+            healthy,
+            executor,
+            unit=unit,
+            drift=drift,
+            budget=budget,
+            seed=settings.seed,
+            solver=settings.solver or "cvode",
+            coils=coils,
+            rounds=rounds,
+            method=method,
+        )
+        if settings.out is not None:
+            write_netcdf(result.tree, settings.out / POSTERIOR_FILE)
+            write_json(settings.out / "summary.json", result.summary())
+            write_text(settings.out / "report.txt", result.format_table() + "\n")
+            save_figure(plot_fault_intensities(result), settings.out / "faults")
+    return result
+
+
+__all__ = [
+    "FAULTS",
+    "Diagnosis",
+    "Fault",
+    "diagnose",
+    "diagnose_study",
+    "separating_sensor",
+    "verdict",
+]
