@@ -73,7 +73,7 @@ def _record(args: argparse.Namespace) -> int:
         alarm_fraction=args.alarm_fraction,
         rounds=args.rounds,
         coils=args.coils,
-        method=args.method,
+        method=_record_method(args),
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations, "
@@ -107,6 +107,17 @@ def _diagnose(args: argparse.Namespace) -> int:
     )
 
 
+def _record_method(args: argparse.Namespace) -> str:
+    """The sampler of a log's calibration: ``--method`` of ``calibrate``, or ``leak``'s."""
+    if "sampler" not in args:
+        return args.method
+    if args.sampler == "smc":
+        raise ValueError(
+            "--method smc is the idealised study's; a LOG takes likelihood or rejection"
+        )
+    return args.sampler or "likelihood"
+
+
 def _leak(args: argparse.Namespace) -> int:
     if getattr(args, "log", None) is not None:  # demo runs the leak study without a log
         return _record(args)
@@ -119,7 +130,7 @@ def _leak(args: argparse.Namespace) -> int:
     result = leak_study(
         _settings(args),
         references_kg=args.references,
-        sampler=args.sampler,
+        sampler=args.sampler or "rejection",
         alarm_fraction=args.alarm_fraction,
         sensor_noise=_sensor_noise(args),
         inputs=inputs,
@@ -405,7 +416,6 @@ def _add_record_options(parser: argparse.ArgumentParser) -> None:
     from pymc_vcc.studies.record_budget import COILS
 
     _add_rounds_option(parser)
-    _add_record_method_option(parser)
     parser.add_argument(
         "--coils",
         choices=list(COILS),
@@ -437,9 +447,9 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
         "--sampler",
         dest="sampler",
         choices=list(SAMPLERS),
-        default="rejection",
-        help="rejection (the paper's ABC), smc (SMC-ABC) or likelihood (exact likelihood under "
-        "--sensor-noise, tempered SMC)",
+        help="rejection (the paper's ABC, the default), smc (SMC-ABC) or likelihood (exact "
+        "likelihood under --sensor-noise, tempered SMC); with a LOG, the sampler under its "
+        "error budget: likelihood (the default) or rejection",
     )
     _add_sensor_noise_option(parser)
     parser.add_argument(
@@ -628,6 +638,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_study_options(diagnose, "results/diagnose", "small")
     _add_record_options(diagnose)
+    _add_record_method_option(diagnose)
     diagnose.set_defaults(handler=_diagnose)
 
     calibrate = commands.add_parser(
@@ -638,6 +649,7 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate.add_argument("log", metavar="LOG", help="a CSV log of the unit")
     _add_study_options(calibrate, "results/calibrate", "small")
     _add_record_options(calibrate)
+    _add_record_method_option(calibrate)
     calibrate.set_defaults(handler=_record, alarm_fraction=0.9)
 
     validate = commands.add_parser(

@@ -68,3 +68,7 @@ def test_a_bad_log_is_refused_in_one_line_before_any_simulation(tmp_path, capsys
     assert not (tmp_path / "b").exists()  # refused before the folder was claimed
     assert main(["leak", "--prior", str(tmp_path), "--out", str(tmp_path / "c")]) == 2
     assert "needs a LOG" in capsys.readouterr().err
+    log_path = str(example_log_path())
+    assert main(["leak", log_path, "--method", "smc", "--out", str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a LOG takes likelihood or rejection" in err
