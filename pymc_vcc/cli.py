@@ -196,6 +196,14 @@ def _estimate(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
+    if args.faults:
+        if args.truth:
+            raise ValueError("--faults names its own variant; give it without --truth")
+        from pymc_vcc.studies.fault_benchmark import fault_benchmark
+
+        scored = fault_benchmark(_settings(args), args.faults, args.datasets)
+        text = f"{scored.format_table()}\n\n{scored.wall_seconds:.0f} s"
+        return _report(args, text, scored.summary())
     if args.truth:
         from pymc_vcc.studies.real_units import real_units_benchmark
 
@@ -491,6 +499,13 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         help="the real-units benchmark instead: units that are not the model (finer coils, "
         "sensor lags and biases, logged inputs off, drifted parameters, all), each charge "
         "calibrated among the nuisance parameters under the error budget",
+    )
+    parser.add_argument(
+        "--faults",
+        choices=list(VARIANTS),
+        metavar="VARIANT",
+        help="the fault benchmark instead: --datasets units of this truth variant, each "
+        "commissioned, then diagnosed with no fault and with each standard fault",
     )
     _add_rounds_option(parser)
     _add_record_method_option(parser)

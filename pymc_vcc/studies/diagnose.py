@@ -79,11 +79,12 @@ FAULTS: tuple[Fault, ...] = (
     Fault("low indoor airflow", ("FI_FLOW",), -1, 0.20),
     Fault("compressor valve leakage", ("CF_VOL",), -1, 0.10),
     Fault("liquid-line restriction", ("DP_RESTR",), +1, 50e3, False, ("kPa", 1e-3)),
-    Fault("non-condensable gas", ("P_NCG",), +1, 30e3, False, ("kPa", 1e-3)),
+    Fault("non-condensable gas", ("P_NCG",), +1, 50e3, False, ("kPa", 1e-3)),
 )
 """The standard faults and their detection thresholds: charge ±10 % (the field's tolerance),
 airflow or air-side conductance −20 %, volumetric efficiency −10 %, a restriction of 50 kPa at
-the rated flow, 30 kPa of non-condensable gas (about 1 K of condensing temperature)."""
+the rated flow, 50 kPa of non-condensable gas (about 2 % of the condensing pressure: twice a
+pressure sensor's accuracy)."""
 
 NAMED = 0.9  # a fault is named when P(intensity beyond its threshold) is at least this
 POSSIBLE = 0.5  # below NAMED and at least this: reported as possible

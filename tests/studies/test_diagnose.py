@@ -46,3 +46,69 @@ def test_verdict_names_one_several_none_or_the_pair_it_cannot_separate():
     assert pairs == [("a", "c")] and "not distinguishable" in text
     text, pairs = verdict(quiet | {"a": 0.6})
     assert pairs == [] and text == "no fault named; possible: a"
+
+
+def test_cases_are_scored_in_yuill_and_brauns_categories():
+    from pymc_vcc.studies.fault_benchmark import score
+
+    gas, fouling = "non-condensable gas", "condenser fouling or low outdoor airflow"
+    assert score(None, "no fault") == "correct"
+    assert score(None, "no fault named; possible: undercharge") == "correct"
+    assert score(None, gas) == "false alarm"
+    assert score(None, f"{gas} or {fouling}: not distinguishable with these sensors") == (
+        "false alarm"
+    )
+    assert score(gas, gas) == "correct diagnosis"
+    assert score(gas, fouling) == "misdiagnosis"
+    assert score(gas, f"several: {fouling}, {gas}") == "misdiagnosis"
+    assert score(gas, "no fault") == "missed detection"
+    assert score(gas, f"{gas} or {fouling}: not distinguishable with these sensors") == (
+        "no response"
+    )
+
+
+def test_score_table_counts_rates_among_healthy_and_faulted_cases():
+    from pymc_vcc.studies.fault_benchmark import summarise_cases
+
+    gas = "non-condensable gas"
+    rows = [
+        {"fault": None, "score": "false alarm", "simulations": 100, "seconds": 1.0},
+        {"fault": None, "score": "correct", "simulations": 100, "seconds": 1.0},
+        {"fault": gas, "score": "correct diagnosis", "severity_error": 0.1, "covered": True,
+         "simulations": 200, "seconds": 3.0},
+        {"fault": gas, "score": "missed detection", "severity_error": 0.5, "covered": False,
+         "simulations": 200, "seconds": 5.0},
+    ]  # fmt: skip
+    table = summarise_cases(rows)
+    assert table["false_alarm_rate"] == 0.5 and table["correct_rate"] == 0.5
+    assert table["missed_rate"] == 0.5 and table["misdiagnosis_rate"] == 0.0
+    assert table["median_severity_error"] == pytest.approx(0.3)
+    assert table["intensity_coverage"] == 0.5 and table["simulations"] == 150
+    assert table["by_fault"][gas] == {
+        "cases": 2, "correct": 0.5, "severity_error": pytest.approx(0.3), "covered": 0.5
+    }  # fmt: skip
+
+
+@pytest.mark.slow
+def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
+    """One unit, healthy and with non-condensable gas, at the smoke budget; run again, it
+    recomputes nothing (the rows and the commissioning posterior are kept)."""
+    from pymc_vcc.studies import StudySettings
+    from pymc_vcc.studies.fault_benchmark import fault_benchmark
+
+    cases = [(None, 0.0), ("non-condensable gas", 150e3)]
+    settings = StudySettings(budget="smoke", out=tmp_path / "faults", n_workers=2)
+    first = fault_benchmark(settings, "model", 1, cases)
+    assert [r["fault"] for r in first.runs] == [None, "non-condensable gas"]
+    gas = first.runs[1]
+    assert gas["intensity_low"] <= gas["intensity_mean"] <= gas["intensity_high"]
+    assert gas["score"] in ("correct diagnosis", "misdiagnosis", "missed detection", "no response")
+    kept = list((tmp_path / "faults" / "checkpoints").glob("validate-faults-unit-*.nc"))
+    assert len(kept) == 1
+    again = fault_benchmark(
+        StudySettings(budget="smoke", out=tmp_path / "faults", n_workers=2, resume=True),
+        "model",
+        1,
+        cases,
+    )
+    assert again.runs == first.runs and again.wall_seconds < 30

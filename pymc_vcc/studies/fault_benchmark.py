@@ -1,0 +1,287 @@
+"""The fault benchmark: diagnosis of simulated units that are not the model, scored as the
+fault-detection literature scores protocols (Yuill and Braun).
+
+Each *unit* is a truth of a real-units variant (:mod:`pymc_vcc.studies.truths`: finer coils,
+sensor errors, drifted parameters...). It is commissioned once (a record of the healthy unit
+calibrated with :func:`~pymc_vcc.studies.unit_log.calibrate_record`), then recorded again in
+every *case* of :data:`CASES` (no fault, or one fault at a stated severity; other noise) and
+each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A case is scored
+
+* no-fault cases: ``false alarm`` when a fault is named, else ``correct``;
+* faulted cases: ``correct diagnosis`` when the fault is named, ``misdiagnosis`` when another
+  is, ``missed detection`` on ``no fault``, ``no response`` when the verdict names none for
+  sure (two faults not distinguishable, or only possible ones);
+
+with the severity error (|posterior mean intensity − true intensity| / true intensity) and
+whether the 95 % interval of the intensity covers the truth.
+
+Every finished case is appended to ``<out>/checkpoints/validate-faults.jsonl`` (and every
+commissioning posterior kept beside it), so an interrupted run resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
+from pymc_vcc.studies.diagnose import FAULTS, diagnose
+from pymc_vcc.studies.truths import VARIANTS, generate_truth
+from pymc_vcc.studies.unit_log import RECORD_BUDGETS, calibrate_record
+
+CASES: tuple[tuple[str | None, float], ...] = (
+    (None, 0.0),
+    ("undercharge", 0.20),
+    ("undercharge", 0.30),
+    ("overcharge", 0.20),
+    ("condenser fouling or low outdoor airflow", 0.40),
+    ("low indoor airflow", 0.40),
+    ("compressor valve leakage", 0.25),
+    ("liquid-line restriction", 150e3),
+    ("non-condensable gas", 120e3),
+)
+"""(fault, true intensity) of each later record of a unit: none, or one fault at a severity
+well above its detection threshold (a fraction of the commissioned value, or Pa)."""
+
+UNIT_CHARGES = (1.2, 1.7)  # kg: a unit's commissioned charge is drawn between these
+"""Commissioned charges leave room for a 30 % loss and a 20 % gain inside the unit's box."""
+RUNS_CHECKPOINT = "validate-faults"
+
+
+@dataclass
+class FaultBenchmarkResult:
+    """The benchmark's cases (one row each) and its score table."""
+
+    runs: list[dict]
+    table: dict = field(default_factory=dict)
+    wall_seconds: float = 0.0
+
+    def summary(self) -> dict:
+        """The JSON summary."""
+        return {"table": self.table, "wall_seconds": round(self.wall_seconds, 1)}
+
+    def format_table(self) -> str:
+        """The score, as ``pymc-vcc validate --faults`` prints it."""
+        t = self.table
+        lines = [
+            f"cases: {t['cases']} ({t['no_fault_cases']} without a fault)",
+            f"false alarms: {t['false_alarm_rate']:.2f} of the no-fault cases",
+            f"correct diagnosis: {t['correct_rate']:.2f} of the faulted cases; misdiagnosis "
+            f"{t['misdiagnosis_rate']:.2f}, missed detection {t['missed_rate']:.2f}, no response "
+            f"{t['no_response_rate']:.2f}",
+            f"severity error (median): {t['median_severity_error']:.2f} of the intensity; "
+            f"intensity inside its 95 % interval: {t['intensity_coverage']:.2f}",
+            f"simulations per case: {t['simulations']:.0f}; s per case: {t['seconds']:.0f}",
+            "",
+            "fault                                     cases  correct  severity error  covered",
+        ]
+        for name, row in t["by_fault"].items():
+            lines.append(
+                f"{name:<41} {row['cases']:>5}  {row['correct']:>7.2f}  "
+                f"{row['severity_error']:>14.2f}  {row['covered']:>7.2f}"
+            )
+        return "\n".join(lines)
+
+
+def _named(verdict: str) -> list[str]:
+    """The faults a verdict names for sure."""
+    if verdict.startswith("several: "):
+        return verdict.removeprefix("several: ").split(", ")
+    return [verdict] if verdict in {f.name for f in FAULTS} else []
+
+
+def score(fault: str | None, verdict: str) -> str:
+    """The Yuill-Braun category of a verdict on a case with ``fault`` (None: no fault)."""
+    named = _named(verdict)
+    if fault is None:
+        alarmed = named or "not distinguishable" in verdict
+        return "false alarm" if alarmed else "correct"
+    if verdict == "no fault":
+        return "missed detection"
+    if named == [fault]:
+        return "correct diagnosis"
+    return "misdiagnosis" if named else "no response"
+
+
+def _case_row(fault_name, intensity, diagnosis) -> dict:
+    row = {
+        "fault": fault_name,
+        "true_intensity": intensity,
+        "verdict": diagnosis.verdict,
+        "score": score(fault_name, diagnosis.verdict),
+        "probabilities": diagnosis.probabilities,
+        "simulations": int(diagnosis.tree["sample_stats"]["n_simulations"]),
+    }
+    if fault_name is not None:
+        draws = diagnosis.intensities[fault_name]
+        low, high = np.quantile(draws, [0.025, 0.975])
+        row |= {
+            "intensity_mean": float(draws.mean()),
+            "intensity_low": float(low),
+            "intensity_high": float(high),
+            "severity_error": abs(float(draws.mean()) - intensity) / intensity,
+            "covered": bool(low <= intensity <= high),
+        }
+    return row
+
+
+def _faulted(parameters: dict[str, float], fault_name: str | None, intensity: float) -> dict:
+    """The unit's parameters with the fault at ``intensity``."""
+    if fault_name is None:
+        return dict(parameters)
+    fault = {f.name: f for f in FAULTS}[fault_name]
+    moved = dict(parameters)
+    for pid in fault.parameters:
+        if fault.relative:
+            moved[pid] = parameters[pid] * (1 + fault.direction * intensity)
+        else:
+            moved[pid] = fault.direction * intensity
+    return moved
+
+
+def summarise_cases(rows: Sequence[dict]) -> dict:
+    """The score table of ``rows`` (see the module docstring)."""
+    healthy = [r for r in rows if r["fault"] is None]
+    faulted = [r for r in rows if r["fault"] is not None]
+
+    def rate(subset, category):
+        return statistics.fmean(r["score"] == category for r in subset) if subset else float("nan")
+
+    by_fault = {}
+    for f in FAULTS:
+        mine = [r for r in faulted if r["fault"] == f.name]
+        if mine:
+            by_fault[f.name] = {
+                "cases": len(mine),
+                "correct": rate(mine, "correct diagnosis"),
+                "severity_error": statistics.median(r["severity_error"] for r in mine),
+                "covered": statistics.fmean(r["covered"] for r in mine),
+            }
+    return {
+        "cases": len(rows),
+        "no_fault_cases": len(healthy),
+        "false_alarm_rate": rate(healthy, "false alarm"),
+        "correct_rate": rate(faulted, "correct diagnosis"),
+        "misdiagnosis_rate": rate(faulted, "misdiagnosis"),
+        "missed_rate": rate(faulted, "missed detection"),
+        "no_response_rate": rate(faulted, "no response"),
+        "median_severity_error": (
+            statistics.median(r["severity_error"] for r in faulted) if faulted else float("nan")
+        ),
+        "intensity_coverage": (
+            statistics.fmean(r["covered"] for r in faulted) if faulted else float("nan")
+        ),
+        "simulations": statistics.fmean(r["simulations"] for r in rows),
+        "seconds": statistics.median(r["seconds"] for r in rows),
+        "by_fault": by_fault,
+    }
+
+
+@holds_output_folder("validate")
+def fault_benchmark(
+    settings: StudySettings,
+    variant: str = "all",
+    n_units: int = 12,
+    cases: Sequence[tuple[str | None, float]] = CASES,
+) -> FaultBenchmarkResult:
+    """Run the benchmark (see the module docstring) on ``n_units`` units of ``variant``, each
+    in every one of ``cases``; ``settings.budget`` picks each calibration's budget."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
+    if n_units < 1:
+        raise ValueError(f"n_units must be at least 1, got {n_units}")
+    known = {f.name for f in FAULTS}
+    unknown = [name for name, _ in cases if name is not None and name not in known]
+    if unknown:
+        raise ValueError(f"unknown fault(s) {unknown}; allowed are {sorted(known)}")
+    budget = settings.budget if isinstance(settings.budget, str) else "small"
+    if budget not in RECORD_BUDGETS:
+        raise ValueError(f"budget {budget!r}: the benchmark takes {list(RECORD_BUDGETS)}")
+    coils = "model" if variant == "model" else "finer"
+    started = time.perf_counter()
+    log = settings.checkpoint(RUNS_CHECKPOINT, ".jsonl")
+    done = {}
+    if log is not None and log.is_file():
+        for line in log.read_text().splitlines():
+            row = json.loads(line)
+            done[(row["unit_seed"], row["fault"], row["true_intensity"], row["budget"])] = row
+    runs = []
+    with settings.open_executor() as executor:
+        for k in range(n_units):
+            seed = settings.seed + 100 * k
+            runs += [done[(seed, f, i, budget)] for f, i in cases if (seed, f, i, budget) in done]
+            if all((seed, f, i, budget) in done for f, i in cases):
+                continue
+            charge = float(np.random.default_rng(seed).uniform(*UNIT_CHARGES))
+            healthy = generate_truth(variant, seed, charge=charge)
+            commissioning = _commissioned(healthy, seed, executor, settings, budget, coils, log)
+            for n, (fault_name, intensity) in enumerate(cases):
+                if (seed, fault_name, intensity, budget) in done:
+                    continue
+                case_started = time.perf_counter()
+                later = generate_truth(
+                    variant,
+                    seed + n + 1,
+                    charge=charge,
+                    parameters=_faulted(healthy.parameters, fault_name, intensity),
+                    n_volumes=healthy.n_volumes,
+                )
+                diagnosis = diagnose(
+                    later.observed,
+                    later.inputs,
+                    commissioning,
+                    executor,
+                    budget=budget,
+                    seed=settings.seed,
+                    solver=settings.solver or "cvode",
+                    coils=coils,
+                )
+                row = _case_row(fault_name, intensity, diagnosis) | {
+                    "unit_seed": seed,
+                    "variant": variant,
+                    "truth_kg": charge,
+                    "budget": budget,
+                    "seconds": time.perf_counter() - case_started,
+                }
+                if log is not None:
+                    with log.open("a") as stream:
+                        stream.write(json.dumps(row) + "\n")
+                runs.append(row)
+    result = FaultBenchmarkResult(runs, summarise_cases(runs))
+    result.wall_seconds = time.perf_counter() - started
+    if settings.out is not None:
+        write_json(settings.out / "summary.json", result.summary())
+        write_text(settings.out / "table.txt", result.format_table() + "\n")
+    return result
+
+
+def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.DataTree:
+    """The commissioning posterior of a unit's healthy record, kept beside the checkpoint."""
+    from pymc_vcc.studies.common import write_netcdf
+
+    kept = None if log is None else log.with_name(f"{log.stem}-unit-{seed}-{budget}.nc")
+    if kept is not None and kept.is_file():
+        return xr.open_datatree(kept, engine="h5netcdf")
+    draws, error_draws = RECORD_BUDGETS[budget]
+    tree = calibrate_record(
+        healthy.observed,
+        healthy.inputs,
+        executor,
+        draws=draws,
+        error_draws=error_draws,
+        seed=settings.seed,
+        solver=settings.solver or "cvode",
+        coils=coils,
+    )
+    if kept is not None:
+        write_netcdf(tree, kept)
+    return tree
+
+
+__all__ = ["CASES", "FaultBenchmarkResult", "fault_benchmark", "score", "summarise_cases"]
