@@ -62,7 +62,12 @@ class Fault:
     display: tuple[str, float] = ("%", 100.0)
 
     def intensity(self, draws: Mapping[str, np.ndarray], commissioned: Mapping[str, float]):
-        """The fault's intensity per posterior draw (``draws``: parameter -> values)."""
+        """The fault's intensity per posterior draw.
+
+        Args:
+            draws: parameter -> its posterior draws.
+            commissioned: parameter -> its commissioning value (relative faults).
+        """
         moves = []
         for pid in self.parameters:
             if self.relative:
@@ -176,7 +181,11 @@ class Diagnosis:
 
 def verdict(probabilities: Mapping[str, float]) -> tuple[str, list[tuple[str, str]]]:
     """The verdict from each fault's probability, and the pairs it could not separate: two
-    faults neither of which reaches :data:`NAMED` but whose probabilities together do."""
+    faults neither of which reaches :data:`NAMED` but whose probabilities together do.
+
+    Args:
+        probabilities: fault name -> P(intensity beyond its threshold).
+    """
     named = [name for name, p in probabilities.items() if p >= NAMED]
     if len(named) > 1:
         return "several: " + ", ".join(named), []
@@ -207,7 +216,15 @@ def separating_sensor(
 ) -> str:
     """The output (of every one the cycle has) whose plateau readings differ most, in units of
     its sensor's accuracy, between the two faults each at its threshold from ``point``, once
-    the second fault's size is matched to the first on the ``logged`` outputs."""
+    the second fault's size is matched to the first on the ``logged`` outputs.
+
+    Args:
+        model: the calibration's simulator (its unit, inputs, window and solver are used).
+        point: parameter values to start from (the posterior mean), id -> value.
+        faults: the two faults.
+        logged: the outputs the record has.
+        accuracy: the sensors' accuracy (the unit each output's difference is counted in).
+    """
     outputs = list(model.unit.cycle_model.outputs.output_ids)
     everything = VCCSimulator(
         model.unit,
@@ -361,7 +378,16 @@ def diagnose_study(
 ) -> Diagnosis:
     """``pymc-vcc diagnose LOG --prior COMMISSIONING``: load and check the log and the
     commissioning posterior before any simulation, diagnose, and write the posterior, the
-    report, the summary and the intensities' figure into ``settings.out``."""
+    report, the summary and the intensities' figure into ``settings.out``.
+
+    Args:
+        settings: where and how it runs (budget ``smoke``, ``small`` or ``paper``).
+        log: the later CSV log.
+        commissioning: the folder (or ``posterior.nc``) of the healthy unit's calibration.
+        column_map: the log's column map (default: ``LOG.columns.toml`` beside it).
+        unit: the unit description (default: the built-in split unit).
+        drift, coils, rounds, method: as for :func:`diagnose`.
+    """
     from pymc_vcc.io.measurements import load_log
     from pymc_vcc.physics.simulate import OUTPUT_INTERVAL
     from pymc_vcc.plots import plot_fault_intensities, save_figure

@@ -97,7 +97,12 @@ def _named(verdict: str) -> list[str]:
 
 
 def score(fault: str | None, verdict: str) -> str:
-    """The Yuill-Braun category of a verdict on a case with ``fault`` (None: no fault)."""
+    """The Yuill-Braun category of a verdict on a case.
+
+    Args:
+        fault: the case's true fault (None: no fault).
+        verdict: the diagnosis's verdict.
+    """
     named = _named(verdict)
     if fault is None:
         alarmed = named or "not distinguishable" in verdict
@@ -146,7 +151,11 @@ def _faulted(parameters: dict[str, float], fault_name: str | None, intensity: fl
 
 
 def summarise_cases(rows: Sequence[dict]) -> dict:
-    """The score table of ``rows`` (see the module docstring)."""
+    """The score table (see the module docstring).
+
+    Args:
+        rows: the cases' rows as :func:`fault_benchmark` keeps them.
+    """
     healthy = [r for r in rows if r["fault"] is None]
     faulted = [r for r in rows if r["fault"] is not None]
 
@@ -190,8 +199,14 @@ def fault_benchmark(
     n_units: int = 12,
     cases: Sequence[tuple[str | None, float]] = CASES,
 ) -> FaultBenchmarkResult:
-    """Run the benchmark (see the module docstring) on ``n_units`` units of ``variant``, each
-    in every one of ``cases``; ``settings.budget`` picks each calibration's budget."""
+    """Run the benchmark (see the module docstring).
+
+    Args:
+        settings: where and how it runs; its budget is each calibration's.
+        variant: the truth variant of every unit (:data:`~pymc_vcc.studies.truths.VARIANTS`).
+        n_units: units, each commissioned once and recorded in every case.
+        cases: (fault name or None, true intensity) of each later record.
+    """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
     if n_units < 1:
