@@ -10,7 +10,9 @@ dozen draws):
   balance at the end, reported);
 * :func:`charge_observability`: how far each 0.1 kg step of M0 moves the outputs, in sensor
   noise standard deviations;
-* :func:`parameter_effects`: the same for each Table III parameter moved to either bound.
+* :func:`parameter_effects`: the same for each Table III parameter moved to either bound;
+* :func:`fault_effects`: what each fault of the cycle does to the rating point's operating
+  point, in engineering quantities (flow, superheat, pressures, power, capacity).
 
 Sensor noise is stated the way instruments are specified: 0.3 K on temperatures, 0.5 % of
 reading on pressures, 1 % of reading on mass flow and electrical power (:func:`noise_sd`, from
@@ -29,7 +31,7 @@ from pymc_vcc.physics.cycles import QUANTITY_INFO
 from pymc_vcc.physics.inputs import constant_inputs
 from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.sensors import KIND_OF_UNITS, RELATIVE_KINDS, TYPICAL_NOISE
-from pymc_vcc.physics.simulate import simulate
+from pymc_vcc.physics.simulate import operating_point, simulate
 from pymc_vcc.physics.unit import Unit, load_unit
 
 OSCILLATION_WINDOW = 300.0
@@ -210,11 +212,57 @@ def parameter_effects(
     return effects
 
 
+FAULT_QUANTITIES = (
+    "MDOT",
+    "superheat",
+    "subcooling",
+    "PE",
+    "PD",
+    "PC",
+    "TD",
+    "TS",
+    "W_comp",
+    "capacity",
+    "COP",
+)
+"""What :func:`fault_effects` compares: the flow, the superheat at the suction and the
+(apparent) subcooling, K, the pressures, the discharge and suction temperatures, the
+compressor's power, the capacity and the COP."""
+
+
+def fault_effects(
+    unit: Unit | None = None,
+    fractions: Sequence[float] = (0.5, 1.0),
+    solver: str | Solver | None = "cvode",
+) -> dict[str, dict[str, float]]:
+    """The operating point at the unit's rating
+    (:func:`~pymc_vcc.physics.simulate.operating_point`) with each fault of the unit's cycle
+    at each of ``fractions`` of its upper bound, the others at 0: ``"nominal"`` -> the
+    fault-free values of :data:`FAULT_QUANTITIES`, ``"<id>=<value>"`` -> their values with the
+    fault (SI)."""
+    unit = load_unit() if unit is None else unit
+
+    def point(theta: Mapping[str, float]) -> dict[str, float]:
+        result = operating_point(unit, theta, solver=solver)
+        if result["status"] != "ok":
+            raise RuntimeError(f"{dict(theta)} failed: {result['failure_reason']}")
+        return {name: float(result[name]) for name in FAULT_QUANTITIES}
+
+    effects = {"nominal": point({})}
+    for spec in unit.faults:
+        for fraction in fractions:
+            value = fraction * spec.high
+            effects[f"{spec.id}={value:g}"] = point({spec.id: value})
+    return effects
+
+
 __all__ = [
+    "FAULT_QUANTITIES",
     "DrawReport",
     "box_probe",
     "charge_observability",
     "check_draw",
+    "fault_effects",
     "noise_sd",
     "parameter_effects",
     "separation",
