@@ -121,6 +121,8 @@ def test_one_mapping_reaches_both_tables():
     np.testing.assert_array_equal(faults, [0.0, 5e4])
     np.testing.assert_array_equal(unit.parameter_vectors()[1], [0.0, 0.0])
     assert unit.parameter_spec("DP_RESTR").unit == "Pa" and unit.parameter_spec("M0").unit == "kg"
+    with pytest.raises(KeyError, match=r"unknown parameter id 'P_AIR'.*fault ids"):
+        unit.parameter_spec("P_AIR")
     with pytest.raises(ValueError, match="outside its bounds"):
         unit.parameter_vectors({"DP_RESTR": -1.0}, check_bounds=True)
 
