@@ -1,10 +1,15 @@
-"""Calibration parameters: ids, long names, units, bounds.
+"""Calibration and fault parameters: ids, long names, units, bounds.
 
 The physics reads parameters by their stable short id (``M0``, ``CF_VOL``, ...). Each cycle
 model declares the ids and units it expects (the split unit's are the 26 of the paper's Table
 III, :data:`pymc_vcc.physics.cycles.split_unit.PARAMETERS`); a unit
 description (``models/*.toml``) gives each id its long name, unit, bounds and nominal value, and
 this module checks them against the model and turns user parameter mappings into vectors.
+
+A cycle model also declares its fault parameters in full (:func:`declared_table`; the split
+unit's :data:`pymc_vcc.physics.cycles.split_unit.FAULTS`), nominal 0 = no fault: they are not
+the unit's to describe and not part of its calibration box. One mapping of values reaches both
+tables (:func:`table_vectors`).
 """
 
 from __future__ import annotations
@@ -172,6 +177,38 @@ class ParameterTable:
         """``n`` parameter sets drawn uniformly from the bounds box."""
         draws = rng.uniform(self.lows, self.highs, size=(n, len(self.specs)))
         return [dict(zip(self.ids, map(float, row), strict=True)) for row in draws]
+
+
+def declared_table(specs: Iterable[ParameterSpec]) -> ParameterTable:
+    """A :class:`ParameterTable` whose specs are declared in code (a cycle model's fault
+    parameters): the ids and units it expects are the specs' own."""
+    specs = tuple(specs)
+    return ParameterTable(specs, tuple((spec.id, spec.unit) for spec in specs))
+
+
+def table_vectors(
+    tables: Mapping[str, ParameterTable],
+    values: Mapping[str, float] | None = None,
+    *,
+    check_bounds: bool = False,
+) -> tuple[np.ndarray, ...]:
+    """One vector per table (its nominal values overridden by ``values``, id -> value, as
+    :meth:`ParameterTable.vector`), the tables given by kind (``{"calibration": ..., "fault":
+    ...}``); an id of none of them is one error line naming it and each kind's ids."""
+    given = dict(values or {})
+    unknown = [pid for pid in given if not any(pid in table.ids for table in tables.values())]
+    if unknown:
+        allowed = " and ".join(
+            f"{kind} ids {list(table.ids)}" for kind, table in tables.items() if len(table)
+        )
+        raise ValueError(f"unknown parameter id(s) {unknown}; allowed are {allowed}")
+    return tuple(
+        table.vector(
+            {pid: value for pid, value in given.items() if pid in table.ids},
+            check_bounds=check_bounds,
+        )
+        for table in tables.values()
+    )
 
 
 def parameter_table(entries: Iterable[ParameterSpec], expected: ParameterIds) -> ParameterTable:

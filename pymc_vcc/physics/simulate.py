@@ -87,8 +87,8 @@ def simulate(
     unit
         Unit description (default: the built-in 3.5 kW R410A split).
     params
-        Parameter values by id (the unit's table; Table III for the split unit); missing ids
-        take their nominal value.
+        Parameter values by id (the unit's table, Table III for the split unit, and its cycle's
+        fault parameters, ``unit.faults``); missing ids take their nominal value (faults: 0).
     inputs
         Input profile (default: the built-in 2120 s step profile), see
         :mod:`pymc_vcc.physics.inputs`.
@@ -127,7 +127,7 @@ def simulate(
     validate_inputs(inputs, model.inputs)
     if t_end is not None:
         inputs = window(inputs, float(t_end))
-    theta = unit.parameters.vector(params)
+    theta, faults = unit.parameter_vectors(params)
     dt = float(output_interval)
     if not dt > 0:
         raise ValueError(f"output_interval must be positive, got {dt}")
@@ -140,7 +140,7 @@ def simulate(
     tables = _fluid(unit.refrigerant).tables
     n = unit.discretisation.n_volumes
     layout = model.layout(n)
-    c = model.constants(unit, theta, controller)
+    c = model.constants(unit, theta, controller, faults)
     atol = layout.tolerances(solver)
 
     on_grid = np.full((times.size, layout.size), np.nan)
@@ -248,7 +248,8 @@ class VCCSimulator:
     raised. ``outputs`` selects output ids (the cycle's outputs, and its optional ones such as
     ``W_comp``); ``t_window = (t_start, t_end)`` simulates up to ``t_end`` and returns the
     outputs from ``t_start`` on. ``parameters`` names the ids a sampler calibrates (default: all
-    26); the others stay at nominal, or at ``fixed`` values. Samplers refuse priors reaching
+    26; the cycle's fault parameters, ``unit.faults``, may be named too); the others stay at
+    nominal (faults: 0), or at ``fixed`` values. Samplers refuse priors reaching
     outside the unit's parameter bounds (``parameter_bounds``) unless
     ``allow_outside_unit_bounds=True`` (extrapolation). ``solver`` picks the ODE solver and
     its tolerances.
@@ -270,9 +271,10 @@ class VCCSimulator:
     max_wall_time
         Wall-clock limit of one simulation, s (default :data:`MAX_WALL_TIME`).
     parameters
-        Ids a sampler calibrates (default: all of the unit's).
+        Ids a sampler calibrates (default: all of the unit's table; fault ids may be added).
     fixed
-        Values of parameters not calibrated, by id, in their units (default: nominal).
+        Values of parameters not calibrated, by id, in their units (default: nominal), fault
+        parameters too.
     allow_outside_unit_bounds
         Let priors reach outside the unit's parameter bounds.
     solver
@@ -310,14 +312,17 @@ class VCCSimulator:
         if unknown or not selected:
             raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(allowed)}")
         self.output_names: tuple[str, ...] = selected
-        all_ids = self.unit.parameters.ids
-        self.parameter_names: tuple[str, ...] = all_ids if parameters is None else tuple(parameters)
+        table_ids = self.unit.parameters.ids
+        all_ids = table_ids + self.unit.faults.ids
+        self.parameter_names: tuple[str, ...] = (
+            table_ids if parameters is None else tuple(parameters)
+        )
         self.fixed: dict[str, float] = dict(fixed or {})
         for what, names in (("parameters", self.parameter_names), ("fixed", self.fixed)):
             unknown = [name for name in names if name not in all_ids]
             if unknown:
                 raise ValueError(f"unknown {what} id(s) {unknown}; allowed are {list(all_ids)}")
-        self.unit.parameters.vector(self.fixed, check_bounds=True)
+        self.unit.parameter_vectors(self.fixed, check_bounds=True)
         end = float(self.inputs["time"].values[-1])
         if t_window is None:
             t_window = (0.0, end)
@@ -355,8 +360,8 @@ class VCCSimulator:
         """The unit's bounds of the calibrated parameters (None with extrapolation allowed)."""
         if self.allow_outside_unit_bounds:
             return None
-        table = self.unit.parameters
-        return {pid: (table[pid].low, table[pid].high) for pid in self.parameter_names}
+        specs = map(self.unit.parameter_spec, self.parameter_names)
+        return {spec.id: (spec.low, spec.high) for spec in specs}
 
     def __call__(
         self, theta: Mapping[str, float], rng: np.random.Generator | None = None
@@ -385,8 +390,11 @@ class VCCSimulator:
 
     @property
     def bounds(self) -> dict[str, tuple[float, float]]:
-        """Bounds (low, high) of every parameter of the unit's table, SI units."""
-        return {spec.id: (spec.low, spec.high) for spec in self.unit.parameters}
+        """Bounds (low, high) of every parameter of the unit's table and of the fault
+        parameters it calibrates, SI units."""
+        faults = [pid for pid in self.parameter_names if pid in self.unit.faults.ids]
+        specs = [*self.unit.parameters, *map(self.unit.faults.__getitem__, faults)]
+        return {spec.id: (spec.low, spec.high) for spec in specs}
 
     def __repr__(self) -> str:
         return (
@@ -420,7 +428,8 @@ def operating_point(
     unit
         Unit description (default: the built-in 3.5 kW R410A split).
     params
-        Parameter values by id; missing ids take their nominal value.
+        Parameter values by id (calibration and fault parameters, as for :func:`simulate`);
+        missing ids take their nominal value.
     duration
         Simulated time at constant inputs, s.
     controller

@@ -17,10 +17,13 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 from typing import Any, get_type_hints
+
+import numpy as np
 
 from pymc_vcc.physics.cycles import cycle_model
 from pymc_vcc.physics.cycles.base import (
@@ -31,7 +34,13 @@ from pymc_vcc.physics.cycles.base import (
     is_fraction,
 )
 from pymc_vcc.physics.integration.solver import DEFAULT_SOLVERS, METHODS
-from pymc_vcc.physics.parameters import ParameterIds, ParameterSpec, ParameterTable, parameter_table
+from pymc_vcc.physics.parameters import (
+    ParameterIds,
+    ParameterSpec,
+    ParameterTable,
+    parameter_table,
+    table_vectors,
+)
 
 BUILTIN_UNIT = "split_3p5kw_r410a.toml"
 """File name of the built-in unit description inside ``pymc_vcc/data``."""
@@ -77,7 +86,8 @@ class Unit:
         The rating point: a value per input of the cycle (SI), the point ``operating_point``
         uses.
     parameters
-        The calibration parameters with their units, bounds and nominal values.
+        The calibration parameters with their units, bounds and nominal values (the box of
+        estimation); its cycle's fault parameters are apart, in :attr:`faults`.
     """
 
     name: str
@@ -94,6 +104,35 @@ class Unit:
     def cycle_model(self) -> CycleModel:
         """The cycle model this unit runs (``[unit] cycle``)."""
         return cycle_model(self.cycle)
+
+    @property
+    def faults(self) -> ParameterTable:
+        """Its cycle's fault parameters (nominal 0: no fault), declared by the cycle model and
+        apart from :attr:`parameters`; a run takes them by id like those."""
+        return self.cycle_model.faults
+
+    def parameter_vectors(
+        self, values: Mapping[str, float] | None = None, *, check_bounds: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(calibration vector, fault vector) from one mapping id -> value over both tables,
+        nominal where not given; an unknown id is one error line naming both tables' ids."""
+        calibration, faults = table_vectors(
+            {"calibration": self.parameters, "fault": self.faults},
+            values,
+            check_bounds=check_bounds,
+        )
+        return calibration, faults
+
+    def parameter_spec(self, pid: str) -> ParameterSpec:
+        """The spec of calibration or fault parameter ``pid``; ``KeyError`` naming both
+        tables' ids otherwise."""
+        for table in (self.parameters, self.faults):
+            if pid in table.ids:
+                return table[pid]
+        raise KeyError(
+            f"unknown parameter id {pid!r}; allowed are calibration ids "
+            f"{list(self.parameters.ids)} and fault ids {list(self.faults.ids)}"
+        )
 
     def with_changes(self, **sections: dict[str, Any]) -> Unit:
         """A copy with some fields of some sections replaced, validated like a loaded file.

@@ -37,7 +37,12 @@ from pymc_vcc.physics.components.moist_air import (
     latent_heat,
     saturation_pressure_water,
 )
-from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
+from pymc_vcc.physics.components.pipe import (
+    friction_coefficient,
+    pipe_volume,
+    pressure_drop,
+    rated_drop_coefficient,
+)
 from pymc_vcc.physics.components.smooth import (
     signed_sqrt,
     smooth_max,
@@ -107,6 +112,35 @@ def test_valve_by_hand_and_in_series_with_the_line():
     dp_line = k_line * series**2 / 1000.0
     dp_valve = (series / 0.5e-6) ** 2 / (2 * 1000.0)
     assert dp_line + dp_valve == pytest.approx(1e6, rel=1e-4)
+
+
+def test_a_restriction_drops_its_rated_drop_and_scales_as_an_orifice():
+    k = rated_drop_coefficient(1.5e5, 0.021, 1000.0)
+    assert pressure_drop(k, 0.021, 1000.0, 0.0) == pytest.approx(1.5e5, rel=1e-12)
+    # the same restriction at half the flow of flashing liquid of half the density
+    assert pressure_drop(k, 0.0105, 500.0, 0.0) == pytest.approx(1.5e5 / 4 * 2, rel=1e-12)
+    assert rated_drop_coefficient(0.0, 0.021, 1000.0) == 0.0
+
+
+def test_a_liquid_line_restriction_lowers_the_valve_flow_monotonically():
+    """The cycle adds the restriction's K to the liquid line's in series with the valve: at 0
+    the flow is the line's alone exactly, and every larger restriction passes less."""
+    args = (0.4, 9e-7, 1.0, 1000.0, 17e5)
+    k_line = 3e9
+    alone = valve_mass_flow(*args, k_line, 2e4)
+    drops = [0.0, 1e3, 1e4, 5e4, 1e5, 2e5, 3e5]
+    flows = [
+        valve_mass_flow(*args, k_line + rated_drop_coefficient(dp, 0.021, 1000.0), 2e4)
+        for dp in drops
+    ]
+    assert flows[0] == alone
+    assert np.all(np.diff(flows) < 0.0)
+    # line, restriction and orifice in series take the whole pressure difference
+    flow = flows[-1]
+    restricted = rated_drop_coefficient(3e5, 0.021, 1000.0)
+    dp_valve = (flow / (0.4 * 9e-7)) ** 2 / (2 * 1000.0)
+    dp_series = (k_line + restricted) * flow**2 / 1000.0
+    assert dp_series + dp_valve == pytest.approx(17e5, rel=1e-4)
 
 
 def test_compressor_pieces_by_hand():

@@ -28,3 +28,11 @@ def pressure_drop(coefficient: float, mass_flow: float, density: float, eps: flo
     """Friction pressure drop in the flow direction, Pa: K ṁ sqrt(ṁ² + eps²) / ρ (regularised
     ṁ|ṁ| so the slope at zero flow is finite)."""
     return coefficient * mass_flow * math.sqrt(mass_flow * mass_flow + eps * eps) / density
+
+
+@njit(cache=True, error_model="numpy")
+def rated_drop_coefficient(rated_drop: float, rated_flow: float, rated_density: float) -> float:
+    """K of the lumped loss Δp = K ṁ|ṁ|/ρ (1/m⁴) of a restriction that drops ``rated_drop`` Pa
+    when ``rated_flow`` kg/s of fluid of density ``rated_density`` kg/m³ passes it: the same
+    restriction drops Δp_r (ṁ/ṁ_r)² ρ_r/ρ at any other flow and density."""
+    return rated_drop * rated_density / (rated_flow * rated_flow)

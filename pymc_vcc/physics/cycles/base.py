@@ -30,7 +30,7 @@ from numba import njit
 from scipy.optimize import brentq
 
 from pymc_vcc.physics.components.density import cell_state, cell_values, fillet_memo
-from pymc_vcc.physics.parameters import ParameterIds, ParameterTable
+from pymc_vcc.physics.parameters import ParameterIds, ParameterTable, declared_table
 from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
 
@@ -100,6 +100,9 @@ class Tolerances(Protocol):
 class UnitDescription(Protocol):
     """What a cycle model reads of a unit description (a :class:`pymc_vcc.physics.unit.Unit`):
     the sections every cycle has and its own ones (an instance of :attr:`CycleModel.hardware`)."""
+
+    @property
+    def refrigerant(self) -> str: ...
 
     @property
     def discretisation(self) -> Discretisation: ...
@@ -325,6 +328,10 @@ class CycleModel(ABC):
     (0, 1)). The unit loader reads and checks them; :meth:`constants` reads them."""
     parameters: ClassVar[ParameterIds]
     """(id, unit) of the calibration parameters a unit of this cycle must give."""
+    faults: ClassVar[ParameterTable] = declared_table(())
+    """Its fault parameters, declared in full (id, meaning, unit, bounds, nominal 0 = no fault):
+    physics a faulty unit adds, apart from the calibration parameters and their box; a run
+    takes them by id like those (none by default)."""
     inputs: ClassVar[InputLayout]
     """The inputs it reads (a unit's ``[rating]`` gives the required ones)."""
     outputs: ClassVar[OutputLayout]
@@ -351,11 +358,16 @@ class CycleModel(ABC):
 
     @abstractmethod
     def constants(
-        self, unit: UnitDescription, theta: np.ndarray, controller: bool | None = None
+        self,
+        unit: UnitDescription,
+        theta: np.ndarray,
+        controller: bool | None = None,
+        faults: np.ndarray | None = None,
     ) -> np.ndarray:
         """The constants record (a one-element structured array) from a unit and a parameter
         vector ordered as :attr:`parameters`; ``controller`` overrides the unit's
-        charge-controller switch."""
+        charge-controller switch; ``faults`` is a vector ordered as :attr:`faults` (None: no
+        fault, their nominal values)."""
 
     @abstractmethod
     def initial_state(

@@ -19,7 +19,11 @@ enthalpy when negative), with ż = M0 - M. Lumped pressure drops: the condenser'
 gas line's) between the discharge and the high-side zone (PD = PC + Δp), the evaporator's (and
 the suction line's) between the low-side zone and the suction (PS = PE - Δp), the liquid
 line's in series with the valve; the compressor flow solves for the pressures its own flow
-causes (:func:`~.split_unit.flow_through_drops`). The indoor coil condenses water where it
+causes (:func:`~.split_unit.flow_through_drops`). Two faults (:data:`~.split_unit.FAULTS`,
+none at their nominal 0): non-condensable gas adds its partial pressure to every pressure the
+high side presents (the compressor's discharge, the valve's inlet, PD and PC) while the
+refrigerant condenses at its own (the state's); a liquid-line restriction adds its flow
+resistance to the line's in series with the valve. The indoor coil condenses water where it
 evaporates below the dew point; where it condenses there is no latent load (``Q_latent`` = 0,
 ``SHR`` = 1).
 """
@@ -56,6 +60,7 @@ from pymc_vcc.physics.cycles.base import (
 )
 from pymc_vcc.physics.cycles.split_unit import (
     DP_REG,
+    FAULTS,
     FLOW_EPS,
     INPUTS,
     OUTPUTS,
@@ -231,9 +236,12 @@ def flows(y, u, c, tables, props, sums):
     outlet = state_at(tables, point_e, p_e, h_suc)
     rho_out = outlet[1]
     rho_vapor_line = rho_c[0] if heating else rho_out
-    speed = speed * protection_speed_factor(p_c, comp.p_protection_start, comp.p_protection_stop)
+    # what the high side presents to the compressor, valve and sensors: the refrigerant's
+    # (saturation) pressure and the partial pressure of non-condensable gas in the condenser
+    p_high = p_c + c.faults.noncondensable_pressure
+    speed = speed * protection_speed_factor(p_high, comp.p_protection_start, comp.p_protection_stop)
     flow = flow_through_drops(
-        p_c,
+        p_high,
         p_e,
         rho_out,
         outlet[2],
@@ -245,7 +253,7 @@ def flows(y, u, c, tables, props, sums):
         heating,
     )
     p_s, p_d, dp_cond, dp_evap, dp_vap = lumped_drops(
-        flow, p_c, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, heating
+        flow, p_high, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, heating
     )
     point_s = saturation_point(tables, p_s)
     point_d = saturation_point(tables, p_d)
@@ -261,8 +269,8 @@ def flows(y, u, c, tables, props, sums):
         c.valve.flow_area,
         c.valve.cf_lev,
         rho_c[nc - 1],
-        p_c - p_e,
-        c.liquid_line.friction,
+        p_high - p_e,
+        c.liquid_line.friction + c.faults.restriction,  # the line and a restriction in series
         DP_REG,
     )
     m_src = c.controller.kp * (c.controller.m0 - mass) + c.controller.ki * y[at.z]
@@ -457,7 +465,7 @@ def write_outputs(y, c, props, flow, q_cond, q_evap, q_sensible, q_latent, out):
     out[OUT.TS] = flow.T_s
     out[OUT.PS] = flow.p_s
     out[OUT.TC] = props[0, first + n - 1]  # the condenser's last cell
-    out[OUT.PC] = y[at.p_cond]
+    out[OUT.PC] = y[at.p_cond] + c.faults.noncondensable_pressure  # what a gauge reads
     out[OUT.TE] = props[0, nc + n - 1]
     out[OUT.PE] = y[at.p_evap]
     out[OUT.MDOT] = flow.m_comp
@@ -616,13 +624,14 @@ def outputs_along(ys, us, constants, tables, rates):
 
 
 class SplitUnitCycle(CycleModel):
-    """A mode of the split unit: its hardware, Table III parameters, inputs, outputs and this
-    module's kernels. A subclass gives the mode's state layout (where the vapour line sits), its
-    charge and start-up state, which fan (``condenser_fan``) blows over the condensing coil and
-    which heat is its useful one (``capacity``)."""
+    """A mode of the split unit: its hardware, Table III and fault parameters, inputs, outputs
+    and this module's kernels. A subclass gives the mode's state layout (where the vapour line
+    sits), its charge and start-up state, which fan (``condenser_fan``) blows over the
+    condensing coil and which heat is its useful one (``capacity``)."""
 
     hardware = SplitUnitHardware
     parameters = PARAMETERS
+    faults = FAULTS
     inputs = INPUTS
     outputs = OUTPUTS
     evaluate = staticmethod(evaluate)
@@ -633,11 +642,15 @@ class SplitUnitCycle(CycleModel):
     """The diagnostic that is the unit's useful heat, W (what its COP divides)."""
 
     def constants(
-        self, unit: UnitDescription, theta: np.ndarray, controller: bool | None = None
+        self,
+        unit: UnitDescription,
+        theta: np.ndarray,
+        controller: bool | None = None,
+        faults: np.ndarray | None = None,
     ) -> np.ndarray:
         layout = self.layout(unit.discretisation.n_volumes)
         return split_unit_constants(
-            unit, theta, layout, controller, condenser_fan=self.condenser_fan
+            unit, theta, layout, controller, condenser_fan=self.condenser_fan, faults=faults
         )
 
     def summary(self, final: Mapping[str, float], tables) -> dict[str, float]:

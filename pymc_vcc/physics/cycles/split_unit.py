@@ -7,10 +7,11 @@ one section of the unit file each). The unit description names the coils by thei
 the cycle's mode (``[condenser]``, ``[evaporator]``) and the fans by where they sit
 (``[outdoor_fan]``, ``[indoor_fan]``); both modes take the paper's Table III parameters
 (:data:`PARAMETERS`), read the same inputs (:data:`INPUTS`) and write the same outputs
-(:data:`OUTPUTS`). :func:`split_unit_constants` turns a unit and a Table III vector into one
-record whose fields the cycle modules read by name. The kernels both modes share (suction tank
-outlet, compressor flow through the lumped pressure drops, a coil cell's wall heat, the
-start-up fill profile) are here too.
+(:data:`OUTPUTS`), and the same two faults (:data:`FAULTS`: a liquid-line restriction,
+non-condensable gas in the condenser). :func:`split_unit_constants` turns a unit, a Table III
+vector and a fault vector into one record whose fields the cycle modules read by name. The
+kernels both modes share (suction tank outlet, compressor flow through the lumped pressure
+drops, a coil cell's wall heat, the start-up fill profile) are here too.
 """
 
 from __future__ import annotations
@@ -30,7 +31,12 @@ from pymc_vcc.physics.components.compressor import (
 )
 from pymc_vcc.physics.components.fan import air_capacity_rate, fan_operating_point
 from pymc_vcc.physics.components.heat_transfer import FLUX_KINKS, cell_heat
-from pymc_vcc.physics.components.pipe import friction_coefficient, pipe_volume, pressure_drop
+from pymc_vcc.physics.components.pipe import (
+    friction_coefficient,
+    pipe_volume,
+    pressure_drop,
+    rated_drop_coefficient,
+)
 from pymc_vcc.physics.components.suction_tank import liquid_level, tank_outlet_enthalpy
 from pymc_vcc.physics.cycles.base import (
     FRACTION,
@@ -41,8 +47,15 @@ from pymc_vcc.physics.cycles.base import (
     UnitDescription,
     quality_enthalpy,
 )
+from pymc_vcc.physics.parameters import ParameterSpec, declared_table
 from pymc_vcc.physics.records import record_array
-from pymc_vcc.physics.refrigerant import saturation_state, state, state_values_at
+from pymc_vcc.physics.refrigerant import (
+    load_refrigerant,
+    p_sat_from_T,
+    saturation_state,
+    state,
+    state_values_at,
+)
 
 
 @dataclass(frozen=True)
@@ -168,6 +181,40 @@ PARAMETERS: tuple[tuple[str, str], ...] = (
 """(id, unit) of the split unit's 26 calibration parameters in either mode, in the order of the
 paper's Table III."""
 
+FAULTS = declared_table(
+    (
+        ParameterSpec(
+            "DP_RESTR",
+            "Liquid-line restriction (clogged filter-drier): its pressure drop at the rated flow",
+            "Pa",
+            0.0,
+            3.0e5,
+            0.0,
+        ),
+        ParameterSpec(
+            "P_NCG",
+            "Non-condensable gas (air) in the condenser: its partial pressure",
+            "Pa",
+            0.0,
+            2.0e5,
+            0.0,
+        ),
+    )
+)
+"""The split unit's fault parameters in either mode, apart from Table III (nominal 0: no fault;
+the upper bounds are severe but physical faults). ``DP_RESTR``: an added flow resistance
+upstream of the expansion valve, given as the pressure drop across it when the rated flow
+(the condenser's ``nominal_mass_flow``) of saturated liquid at :data:`RESTRICTION_RATING_T`
+passes it, what a service engineer reads across a filter-drier (3 bar: 5 K of saturation
+temperature at 40 °C in R410A, a drier far past replacement). ``P_NCG``: the partial pressure
+of air trapped in the condenser, added to every pressure the high side presents (2 bar: about
+the air of a line set and indoor coil left unevacuated, 2.5 L at 1 bar, gathered in the
+condenser's vapour space). models/README.md, "Faults", gives the physics and its limits."""
+
+RESTRICTION_RATING_T = 313.15
+"""Saturated-liquid temperature of the restriction's rated drop, K (40 °C: the liquid line at
+the rating point)."""
+
 INPUTS = InputLayout(
     [
         InputSpec("valve_opening", "Expansion valve opening", "1", 0.02, 1.0, stepped=True),
@@ -212,6 +259,14 @@ CONTROLLER_RECORD = np.dtype([("kp", np.float64), ("ki", np.float64), ("m0", np.
 
 TANK_RECORD = np.dtype([("volume", np.float64), ("bleed_fraction_full", np.float64)])
 """Suction accumulator: volume (m³) and liquid mass fraction of its outflow when full (-)."""
+
+FAULT_RECORD = np.dtype(
+    [
+        ("restriction", np.float64),  # K of Δp = K ṁ|ṁ|/ρ upstream of the valve, 1/m⁴
+        ("noncondensable_pressure", np.float64),  # partial pressure in the condenser, Pa
+    ]
+)
+"""The faults (:data:`FAULTS`) as the kernels read them."""
 
 # regularisation widths and iteration counts of the split-unit kernels
 FLOW_EPS = 1e-4  # kg/s, upwind weights and |ṁ| in pressure drops
@@ -286,6 +341,7 @@ def split_unit_dtype(layout: StateLayout) -> np.dtype:
             ("compressor", COMPRESSOR_RECORD),
             ("valve", VALVE_RECORD),
             ("controller", CONTROLLER_RECORD),
+            ("faults", FAULT_RECORD),
         ]
     )
 
@@ -296,11 +352,18 @@ def split_unit_constants(
     layout: StateLayout,
     controller: bool | None,
     condenser_fan: Literal["outdoor", "indoor"],
+    faults: np.ndarray | None = None,
 ) -> np.ndarray:
     """The constants record (a one-element structured array) of a split unit;
     ``condenser_fan`` says which fan (and Table III fan parameters, ``FO_*`` or ``FI_*``) serves
-    the condenser, the other the evaporator."""
+    the condenser, the other the evaporator; ``faults`` is ordered as :data:`FAULTS` (None: no
+    fault)."""
     p = dict(zip((pid for pid, _ in PARAMETERS), np.asarray(theta, dtype=float), strict=True))
+    fault = dict(
+        zip(
+            FAULTS.ids, FAULTS.nominal if faults is None else np.asarray(faults, float), strict=True
+        )
+    )
     n = unit.discretisation.n_volumes
     hw: SplitUnitHardware = unit.hardware
     fans = {
@@ -353,8 +416,24 @@ def split_unit_constants(
         },
         "valve": {"flow_area": hw.expansion_valve.flow_area, "cf_lev": p["CF_LEV"]},
         "controller": {"kp": kp, "ki": kp * kp / 4.0, "m0": p["M0"]},
+        "faults": {
+            "restriction": rated_drop_coefficient(
+                fault["DP_RESTR"],
+                hw.condenser.nominal_mass_flow,
+                rated_liquid_density(unit.refrigerant),
+            ),
+            "noncondensable_pressure": fault["P_NCG"],
+        },
     }
     return record_array(split_unit_dtype(layout), values)
+
+
+@functools.cache
+def rated_liquid_density(refrigerant: str) -> float:
+    """Density of saturated liquid at :data:`RESTRICTION_RATING_T`, kg/m³: the fluid of a
+    liquid-line restriction's rated drop."""
+    tables = load_refrigerant(refrigerant).tables
+    return float(saturation_state(tables, p_sat_from_T(tables, RESTRICTION_RATING_T))[3])
 
 
 def _coil(
@@ -407,9 +486,12 @@ def suction_outlet(sat_e, h_tank, rho_tank, c):
 
 
 @njit(cache=True, error_model="numpy")
-def lumped_drops(flow, p_c, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, hot_gas_line):
+def lumped_drops(
+    flow, p_high, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, hot_gas_line
+):
     """(p_s, p_d, Δp_cond, Δp_evap, Δp_vap), Pa, when ``flow`` (kg/s) passes the lumped drops:
-    the condenser's before the condensing pressure, the evaporator's after the evaporating one;
+    the condenser's before the high-side pressure ``p_high`` (the condensing pressure, plus the
+    partial pressure of any non-condensable gas), the evaporator's after the evaporating one;
     the vapour line's on the discharge side when it carries the hot gas (``hot_gas_line``,
     heating), on the suction side otherwise (cooling). ``rho_friction_*`` are the coils'
     friction densities (mean specific volume), ``rho_vapor_line`` the line's density."""
@@ -417,13 +499,13 @@ def lumped_drops(flow, p_c, p_e, rho_vapor_line, rho_friction_c, rho_friction_e,
     dp_evap = pressure_drop(c.evaporator.friction, flow, rho_friction_e, FLOW_EPS)
     dp_vap = pressure_drop(c.vapor_line.friction, flow, rho_vapor_line, FLOW_EPS)
     if hot_gas_line:
-        return p_e - dp_evap, p_c + dp_cond + dp_vap, dp_cond, dp_evap, dp_vap
-    return p_e - dp_evap - dp_vap, p_c + dp_cond, dp_cond, dp_evap, dp_vap
+        return p_e - dp_evap, p_high + dp_cond + dp_vap, dp_cond, dp_evap, dp_vap
+    return p_e - dp_evap - dp_vap, p_high + dp_cond, dp_cond, dp_evap, dp_vap
 
 
 @njit(cache=True, error_model="numpy")
 def flow_through_drops(
-    p_c,
+    p_high,
     p_e,
     rho_out,
     drho_dp_out,
@@ -443,7 +525,7 @@ def flow_through_drops(
 
     def compressor_flow(flow):
         p_s, p_d = lumped_drops(
-            flow, p_c, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, hot_gas_line
+            flow, p_high, p_e, rho_vapor_line, rho_friction_c, rho_friction_e, c, hot_gas_line
         )[:2]
         eta = volumetric_efficiency(p_d / p_s, comp.clearance, comp.exponent, comp.cf_vol)
         rho_s = rho_out + drho_dp_out * (p_s - p_e)
