@@ -6,10 +6,13 @@ dozen draws):
 
 * :func:`box_probe`: uniform draws at constant rated inputs; per draw, the compressor's first
   and second law at every output time, air flows and fan powers inside the ranges the box
-  implies, no sustained oscillation of PC, charge held, and success;
+  implies, no sustained oscillation of PC, charge held, and success (and the cycle's energy
+  balance at the end, reported);
 * :func:`charge_observability`: how far each 0.1 kg step of M0 moves the outputs, in sensor
   noise standard deviations;
-* :func:`parameter_effects`: the same for each Table III parameter moved to either bound.
+* :func:`parameter_effects`: the same for each Table III parameter moved to either bound;
+* :func:`fault_effects`: what each fault of the cycle does to the rating point's operating
+  point, in engineering quantities (flow, superheat, pressures, power, capacity).
 
 Sensor noise is stated the way instruments are specified: 0.3 K on temperatures, 0.5 % of
 reading on pressures, 1 % of reading on mass flow and electrical power (:func:`noise_sd`, from
@@ -26,8 +29,9 @@ import xarray as xr
 
 from pymc_vcc.physics.cycles import QUANTITY_INFO
 from pymc_vcc.physics.inputs import constant_inputs
+from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.sensors import KIND_OF_UNITS, RELATIVE_KINDS, TYPICAL_NOISE
-from pymc_vcc.physics.simulate import simulate
+from pymc_vcc.physics.simulate import operating_point, simulate
 from pymc_vcc.physics.unit import Unit, load_unit
 
 OSCILLATION_WINDOW = 300.0
@@ -84,6 +88,7 @@ class DrawReport:
     air_in_range: bool  # diagnostics inside the ranges the box implies (the cycle's box_ranges)
     oscillation: float  # peak-to-peak PC over the last window / PC
     mass_error: float  # max |M - M0| / M0
+    energy_balance: float  # (Q_cond - Q_evap - W_ref) / Q_cond at the end
 
     @property
     def holds(self) -> bool:
@@ -98,13 +103,20 @@ class DrawReport:
         )
 
 
-def check_draw(unit: Unit, theta: Mapping[str, float], duration: float = 1200.0) -> DrawReport:
-    """Run ``theta`` at constant rated inputs for ``duration`` s and check it (see module)."""
-    run = simulate(unit, theta, rated_inputs(unit, duration), diagnostics=True)
+def check_draw(
+    unit: Unit,
+    theta: Mapping[str, float],
+    duration: float = 1200.0,
+    solver: str | Solver | None = None,
+) -> DrawReport:
+    """Run ``theta`` (calibration and fault parameters by id) at constant rated inputs for
+    ``duration`` s with ``solver`` (default: :func:`~pymc_vcc.physics.simulate.simulate`'s)
+    and check it (see module)."""
+    run = simulate(unit, theta, rated_inputs(unit, duration), diagnostics=True, solver=solver)
     if run.attrs["status"] != "ok":
         nan = float("nan")
         return DrawReport(
-            dict(theta), "failed", run.attrs["failure_reason"], False, False, False, nan, nan
+            dict(theta), "failed", run.attrs["failure_reason"], False, False, False, nan, nan, nan
         )
     tolerance = 1e-9 * run["W_comp"].values
     first_law = bool(np.all(run["W_ref"].values <= run["W_comp"].values + tolerance))
@@ -114,6 +126,8 @@ def check_draw(unit: Unit, theta: Mapping[str, float], duration: float = 1200.0)
         for name, (low, high) in unit.cycle_model.box_ranges(unit).items()
     )
     recent = run["PC"].sel(time=slice(duration - OSCILLATION_WINDOW, None)).values
+    end = run.isel(time=-1)
+    q_cond = float(end["Q_cond"])
     return DrawReport(
         theta=dict(theta),
         status="ok",
@@ -123,6 +137,7 @@ def check_draw(unit: Unit, theta: Mapping[str, float], duration: float = 1200.0)
         air_in_range=bool(air),
         oscillation=float(np.ptp(recent) / np.mean(recent)),
         mass_error=float(run.attrs["mass_error"]),
+        energy_balance=(q_cond - float(end["Q_evap"]) - float(end["W_ref"])) / q_cond,
     )
 
 
@@ -197,11 +212,57 @@ def parameter_effects(
     return effects
 
 
+FAULT_QUANTITIES = (
+    "MDOT",
+    "superheat",
+    "subcooling",
+    "PE",
+    "PD",
+    "PC",
+    "TD",
+    "TS",
+    "W_comp",
+    "capacity",
+    "COP",
+)
+"""What :func:`fault_effects` compares: the flow, the superheat at the suction and the
+(apparent) subcooling, K, the pressures, the discharge and suction temperatures, the
+compressor's power, the capacity and the COP."""
+
+
+def fault_effects(
+    unit: Unit | None = None,
+    fractions: Sequence[float] = (0.5, 1.0),
+    solver: str | Solver | None = "cvode",
+) -> dict[str, dict[str, float]]:
+    """The operating point at the unit's rating
+    (:func:`~pymc_vcc.physics.simulate.operating_point`) with each fault of the unit's cycle
+    at each of ``fractions`` of its upper bound, the others at 0: ``"nominal"`` -> the
+    fault-free values of :data:`FAULT_QUANTITIES`, ``"<id>=<value>"`` -> their values with the
+    fault (SI)."""
+    unit = load_unit() if unit is None else unit
+
+    def point(theta: Mapping[str, float]) -> dict[str, float]:
+        result = operating_point(unit, theta, solver=solver)
+        if result["status"] != "ok":
+            raise RuntimeError(f"{dict(theta)} failed: {result['failure_reason']}")
+        return {name: float(result[name]) for name in FAULT_QUANTITIES}
+
+    effects = {"nominal": point({})}
+    for spec in unit.faults:
+        for fraction in fractions:
+            value = fraction * spec.high
+            effects[f"{spec.id}={value:g}"] = point({spec.id: value})
+    return effects
+
+
 __all__ = [
+    "FAULT_QUANTITIES",
     "DrawReport",
     "box_probe",
     "charge_observability",
     "check_draw",
+    "fault_effects",
     "noise_sd",
     "parameter_effects",
     "separation",

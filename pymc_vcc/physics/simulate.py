@@ -312,8 +312,11 @@ class VCCSimulator:
         if unknown or not selected:
             raise ValueError(f"unknown output id(s) {unknown}; allowed are {list(allowed)}")
         self.output_names: tuple[str, ...] = selected
-        all_ids = self.unit.parameters.ids + self.unit.faults.ids
-        self.parameter_names: tuple[str, ...] = all_ids if parameters is None else tuple(parameters)
+        table_ids = self.unit.parameters.ids
+        all_ids = table_ids + self.unit.faults.ids
+        self.parameter_names: tuple[str, ...] = (
+            table_ids if parameters is None else tuple(parameters)
+        )
         self.fixed: dict[str, float] = dict(fixed or {})
         for what, names in (("parameters", self.parameter_names), ("fixed", self.fixed)):
             unknown = [name for name in names if name not in all_ids]

@@ -124,9 +124,15 @@ class Unit:
         return calibration, faults
 
     def parameter_spec(self, pid: str) -> ParameterSpec:
-        """The spec of calibration or fault parameter ``pid``."""
-        table = self.faults if pid in self.faults.ids else self.parameters
-        return table[pid]
+        """The spec of calibration or fault parameter ``pid``; ``KeyError`` naming both
+        tables' ids otherwise."""
+        for table in (self.parameters, self.faults):
+            if pid in table.ids:
+                return table[pid]
+        raise KeyError(
+            f"unknown parameter id {pid!r}; allowed are calibration ids "
+            f"{list(self.parameters.ids)} and fault ids {list(self.faults.ids)}"
+        )
 
     def with_changes(self, **sections: dict[str, Any]) -> Unit:
         """A copy with some fields of some sections replaced, validated like a loaded file.

@@ -1,13 +1,16 @@
-"""Table III parameters: ids, validation of specs and of user parameter mappings."""
+"""Table III and fault parameters: ids, validation of specs and of user parameter mappings."""
 
 from importlib.resources import files
 
 import numpy as np
 import pytest
 
-from pymc_vcc.physics.cycles.split_unit import PARAMETERS
+from pymc_vcc.physics.cycles import CYCLE_MODELS
+from pymc_vcc.physics.cycles.base import CycleModel
+from pymc_vcc.physics.cycles.split_unit import FAULTS, PARAMETERS
 from pymc_vcc.physics.parameters import ParameterSpec, parameter_table
-from pymc_vcc.physics.unit import load_unit
+from pymc_vcc.physics.simulate import simulate
+from pymc_vcc.physics.unit import HEAT_PUMP_UNIT, load_unit
 
 
 def test_table_iii_has_26_unique_ids_starting_with_charge():
@@ -95,3 +98,39 @@ def test_a_stated_tolerance_is_read_and_kept_by_changes(tmp_path):
     bad.write_text(text.replace("tolerance = 0.01", 'tolerance = "1 %"', 1))
     with pytest.raises(ValueError, match=r"L_COND\] tolerance: expected a number"):
         load_unit(bad)
+
+
+def test_the_fault_table_is_declared_apart_from_table_iii():
+    assert FAULTS.ids == ("DP_RESTR", "P_NCG")
+    assert [spec.unit for spec in FAULTS] == ["Pa", "Pa"]
+    assert np.all(FAULTS.nominal == 0.0) and np.all(FAULTS.lows == 0.0)
+    assert FAULTS["DP_RESTR"].high == 3.0e5 and FAULTS["P_NCG"].high == 2.0e5
+    assert all(spec.name for spec in FAULTS)  # a one-line meaning each
+    for unit in (load_unit(), load_unit(HEAT_PUMP_UNIT)):  # both modes share the physics
+        assert unit.faults is FAULTS
+        assert not set(unit.faults.ids) & set(unit.parameters.ids)
+        assert len(unit.parameters) == 26
+    assert {model.faults.ids for model in CYCLE_MODELS.values()} == {FAULTS.ids}
+    assert len(CycleModel.faults) == 0  # a new cycle declares none unless it says so
+
+
+def test_one_mapping_reaches_both_tables():
+    unit = load_unit()
+    theta, faults = unit.parameter_vectors({"M0": 1.5, "P_NCG": 5e4})
+    assert theta[0] == 1.5 and np.all(theta[1:] == unit.parameters.nominal[1:])
+    np.testing.assert_array_equal(faults, [0.0, 5e4])
+    np.testing.assert_array_equal(unit.parameter_vectors()[1], [0.0, 0.0])
+    assert unit.parameter_spec("DP_RESTR").unit == "Pa" and unit.parameter_spec("M0").unit == "kg"
+    with pytest.raises(KeyError, match=r"unknown parameter id 'P_AIR'.*fault ids"):
+        unit.parameter_spec("P_AIR")
+    with pytest.raises(ValueError, match="outside its bounds"):
+        unit.parameter_vectors({"DP_RESTR": -1.0}, check_bounds=True)
+
+
+def test_an_unknown_fault_id_is_one_line_naming_it_and_the_allowed_ones():
+    with pytest.raises(ValueError) as refused:
+        simulate(params={"P_AIR": 1e5}, t_end=1.0)
+    message = str(refused.value)
+    assert "\n" not in message
+    assert message.startswith("unknown parameter id(s) ['P_AIR']; allowed are calibration ids")
+    assert "fault ids ['DP_RESTR', 'P_NCG']" in message and "'M0'" in message
