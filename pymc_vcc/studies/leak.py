@@ -146,7 +146,8 @@ def calibrate_charge(
     ``sensor_noise`` is the noise the sampler accounts for (None: none, as the paper);
     ``checkpoint_name`` names its checkpoint under ``settings.out``. With a ``table``, rejection
     runs on its rows (see :func:`shared_table`) and the count is the rows this dataset used.
-    ``smc_draws``: SMC particles (default: the budget's ``smc_draws``).
+    ``smc_draws``: SMC particles (default: the budget's ``likelihood_draws`` for the likelihood,
+    its ``smc_draws`` for SMC-ABC).
     """
     if sampler == "rejection" and table is not None:
         work = settings.work
@@ -173,6 +174,7 @@ def calibrate_charge(
             **settings.rejection_options(),
         )
         return tree, int(tree["sample_stats"]["n_simulations"])
+    work = settings.work
     with pm.Model():
         add_observed_node(
             simulator,
@@ -185,7 +187,7 @@ def calibrate_charge(
             distance=distance,
         )
         tree = sample_smc_abc(
-            smc_draws or settings.work.smc_draws,
+            smc_draws or (work.likelihood_draws if sampler == "likelihood" else work.smc_draws),
             executor=executor,
             random_seed=int(seed.generate_state(1)[0]),
             checkpoint=settings.checkpoint(checkpoint_name),
@@ -254,7 +256,8 @@ def leak_study(
         reference_table: rejection only: simulate the budget's draws once and calibrate every
             dataset on that shared table (:mod:`pymc_vcc.inference.reference_table`); the
             study's simulation count is then the table's size.
-        smc_draws: particles of the SMC samplers (default: the budget's ``smc_draws``).
+        smc_draws: particles of the SMC samplers (default: the budget's ``likelihood_draws``
+            or ``smc_draws``).
     """
     started = time.perf_counter()
     if sampler not in SAMPLERS:

@@ -133,7 +133,8 @@ def validation_study(
         unit, inputs, t_calibration: the unit, its input profile and calibration window.
         smc_epsilon: kernel width of SMC-ABC methods.
         reference_table: the rejection methods share one table of prior simulations (module).
-        smc_draws: particles of the likelihood path (default: the budget's ``smc_draws``).
+        smc_draws: particles of the likelihood path (default: the budget's
+            ``likelihood_draws``).
     """
     started = time.perf_counter()
     unknown = [name for name in methods if name not in METHODS]
