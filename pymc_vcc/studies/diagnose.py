@@ -392,13 +392,15 @@ def diagnose_study(
     from pymc_vcc.physics.simulate import OUTPUT_INTERVAL
     from pymc_vcc.plots import plot_fault_intensities, save_figure
     from pymc_vcc.studies.common import write_json, write_netcdf, write_text
-    from pymc_vcc.studies.unit_log import POSTERIOR_FILE, load_commissioning
+    from pymc_vcc.studies.unit_log import (
+        POSTERIOR_FILE,
+        check_drift,
+        load_commissioning,
+        record_budget_name,
+    )
 
-    if not 0.0 <= drift <= 1.0:
-        raise ValueError(f"drift must lie in [0, 1] (a fraction of each range), got {drift}")
-    budget = settings.budget if isinstance(settings.budget, str) else "small"
-    if budget not in RECORD_BUDGETS:
-        raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
+    check_drift(drift)
+    budget = record_budget_name(settings)
     unit = unit or load_unit()
     measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
     healthy = load_commissioning(commissioning)

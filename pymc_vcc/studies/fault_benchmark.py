@@ -33,7 +33,7 @@ import xarray as xr
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import FAULTS, diagnose
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
-from pymc_vcc.studies.unit_log import RECORD_BUDGETS, calibrate_record
+from pymc_vcc.studies.unit_log import RECORD_BUDGETS, calibrate_record, record_budget_name
 
 CASES: tuple[tuple[str | None, float], ...] = (
     (None, 0.0),
@@ -215,9 +215,7 @@ def fault_benchmark(
     unknown = [name for name, _ in cases if name is not None and name not in known]
     if unknown:
         raise ValueError(f"unknown fault(s) {unknown}; allowed are {sorted(known)}")
-    budget = settings.budget if isinstance(settings.budget, str) else "small"
-    if budget not in RECORD_BUDGETS:
-        raise ValueError(f"budget {budget!r}: the benchmark takes {list(RECORD_BUDGETS)}")
+    budget = record_budget_name(settings)
     coils = "model" if variant == "model" else "finer"
     started = time.perf_counter()
     log = settings.checkpoint(RUNS_CHECKPOINT, ".jsonl")

@@ -33,12 +33,13 @@ from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_js
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
 from pymc_vcc.studies.unit_log import (
     CHARGE,
-    METHODS,
     RECORD_BUDGETS,
     calibrate_record,
     charge_summary,
+    check_method,
     commissioning_prior,
     predictive_checks,
+    record_budget_name,
 )
 
 LOSS = 0.2  # the leak the alarm must detect, a fraction of the commissioned charge
@@ -165,11 +166,8 @@ def real_units_benchmark(
         raise ValueError(f"unknown truth variant(s) {unknown}; allowed are {list(VARIANTS)}")
     if n_datasets < 1:
         raise ValueError(f"n_datasets must be at least 1, got {n_datasets}")
-    budget = settings.budget if isinstance(settings.budget, str) else "small"
-    if budget not in RECORD_BUDGETS:
-        raise ValueError(f"budget {budget!r}: the benchmark takes {list(RECORD_BUDGETS)}")
-    if method not in METHODS:
-        raise ValueError(f"method {method!r}: allowed are {list(METHODS)}")
+    budget = record_budget_name(settings)
+    check_method(method)
     work = (*RECORD_BUDGETS[budget], rounds, method)
     started = time.perf_counter()
     log = settings.checkpoint(RUNS_CHECKPOINT, ".jsonl")  # removed first unless resuming

@@ -94,6 +94,28 @@ PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
 PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in sample_stats
 
 
+def record_budget_name(settings) -> str:
+    """The name of ``settings``' budget for a record's calibration (a budget given as a
+    :class:`~pymc_vcc.studies.common.Budget` counts as ``small``), refused in one line unless
+    one of :data:`RECORD_BUDGETS`."""
+    budget = settings.budget if isinstance(settings.budget, str) else "small"
+    if budget not in RECORD_BUDGETS:
+        raise ValueError(f"budget {budget!r}: a record's calibration takes {list(RECORD_BUDGETS)}")
+    return budget
+
+
+def check_method(method: str) -> None:
+    """Refuse a sampler not in :data:`METHODS`, in one line."""
+    if method not in METHODS:
+        raise ValueError(f"method {method!r}: allowed are {list(METHODS)}")
+
+
+def check_drift(drift: float) -> None:
+    """Refuse a drift outside [0, 1] (a fraction of each parameter's range), in one line."""
+    if not 0.0 <= drift <= 1.0:
+        raise ValueError(f"drift must lie in [0, 1] (a fraction of each range), got {drift}")
+
+
 def box_prior(unit: Unit, parameters: Sequence[str]) -> UniformPrior:
     """Uniform on the unit's bounds of ``parameters`` (calibration or fault parameters)."""
     specs = map(unit.parameter_spec, parameters)
@@ -161,8 +183,7 @@ def calibrate_record(
     if rounds < 1:
         raise ValueError(f"rounds must be at least 1, got {rounds}")
     check_coils(coils)
-    if method not in METHODS:
-        raise ValueError(f"method {method!r}: allowed are {list(METHODS)}")
+    check_method(method)
     rng = np.random.default_rng(seed)
     t_end = float(observed["time"].values[-1])
     model = VCCSimulator(
@@ -461,11 +482,8 @@ def record_study(
     started = time.perf_counter()
     if not 0.0 < alarm_fraction < 1.0:
         raise ValueError(f"alarm fraction must lie in (0, 1), got {alarm_fraction}")
-    if not 0.0 <= drift <= 1.0:
-        raise ValueError(f"drift must lie in [0, 1] (a fraction of each range), got {drift}")
-    budget = settings.budget if isinstance(settings.budget, str) else "small"
-    if budget not in RECORD_BUDGETS:
-        raise ValueError(f"budget {budget!r}: a record's calibration takes {list(RECORD_BUDGETS)}")
+    check_drift(drift)
+    budget = record_budget_name(settings)
     unit = unit or load_unit()
     measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
     prior, commissioned = None, None
