@@ -26,8 +26,6 @@ from pymc_vcc.inference.predictive import predictive_bands
 if TYPE_CHECKING:
     from arviz_base.labels import BaseLabeller, MapLabeller
 
-    from pymc_vcc.studies.diagnose import Diagnosis
-
 _DISPLAY_UNITS = {
     "K": ("°C", lambda v: v - 273.15),
     "Pa": ("bar", lambda v: v / 1e5),
@@ -430,23 +428,19 @@ def plot_predictive(
     return figure
 
 
-def plot_fault_intensities(diagnosis: Diagnosis) -> Figure:
-    """ArviZ's ``plot_forest`` of each fault's intensity in units of its detection threshold
-    (1: the threshold; 0: as at commissioning), median with 50 % and 95 % intervals, and its
-    probability in the label."""
+def plot_fault_intensities(scaled: Mapping[str, np.ndarray], title: str = "") -> Figure:
+    """ArviZ's ``plot_forest`` of fault intensities, each in units of its detection threshold
+    (1: the threshold; 0: as at commissioning): median with 50 % and 95 % intervals.
+
+    Args:
+        scaled: row label -> posterior draws of a fault's intensity / its threshold.
+        title: drawn above the forest (e.g. the verdict).
+    """
     import arviz_plots as azp
 
-    from pymc_vcc.studies.diagnose import FAULTS
-
-    rows = {
-        f"{fault.name.replace(' or ', ' or\n')}\nP = {diagnosis.probabilities[fault.name]:.2f}": (
-            diagnosis.intensities[fault.name] / fault.threshold
-        )
-        for fault in FAULTS
-    }
     posterior = xr.Dataset(
-        {"intensity": (("fault", "chain", "draw"), np.stack(list(rows.values()))[:, None, :])},
-        coords={"fault": list(rows)},
+        {"intensity": (("fault", "chain", "draw"), np.stack(list(scaled.values()))[:, None, :])},
+        coords={"fault": list(scaled)},
     )
     collection = azp.plot_forest(
         xr.DataTree.from_dict({"posterior": posterior}),
@@ -454,12 +448,12 @@ def plot_fault_intensities(diagnosis: Diagnosis) -> Figure:
         labels=["fault"],
         ci_probs=[0.5, 0.95],
         point_estimate="median",
-        figure_kwargs={"figsize": (9.0, 1.0 + 0.6 * len(rows))},
+        figure_kwargs={"figsize": (9.0, 1.0 + 0.6 * len(scaled))},
     )
     figure = collection.viz["figure"].item()
     forest = figure.axes[-1]
     forest.axvline(1.0, color="tab:red", linestyle="--", linewidth=1)
     forest.axvline(0.0, color="grey", linewidth=0.8)
     forest.set_xlabel("intensity / detection threshold (dashed: the threshold)")
-    forest.set_title(f"verdict: {diagnosis.verdict}", fontsize=9)
+    forest.set_title(title, fontsize=9)
     return figure

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import xarray as xr
+from matplotlib.figure import Figure
 
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.error_model import SensorAccuracy, plateau_windows, summarise
@@ -150,6 +151,19 @@ class Diagnosis:
             "confusions": [list(c) for c in self.confusions],
             "charge_change_kg": float(charge.mean() - self.commissioned[CHARGE]),
         }
+
+    def plot(self) -> Figure:
+        """Every fault's intensity in units of its threshold, its probability in its label and
+        the verdict above (:func:`~pymc_vcc.plots.plot_fault_intensities`)."""
+        from pymc_vcc.plots import plot_fault_intensities
+
+        rows = {
+            f"{f.name.replace(' or ', ' or\n')}\nP = {self.probabilities[f.name]:.2f}": (
+                self.intensities[f.name] / f.threshold
+            )
+            for f in FAULTS
+        }
+        return plot_fault_intensities(rows, f"verdict: {self.verdict}")
 
     def format_table(self) -> str:
         """The one-page report: the verdict, then every fault's intensity and probability."""
@@ -390,7 +404,7 @@ def diagnose_study(
     """
     from pymc_vcc.io.measurements import load_log
     from pymc_vcc.physics.simulate import OUTPUT_INTERVAL
-    from pymc_vcc.plots import plot_fault_intensities, save_figure
+    from pymc_vcc.plots import save_figure
     from pymc_vcc.studies.common import write_json, write_netcdf, write_text
     from pymc_vcc.studies.unit_log import (
         POSTERIOR_FILE,
@@ -423,7 +437,7 @@ def diagnose_study(
             write_netcdf(result.tree, settings.out / POSTERIOR_FILE)
             write_json(settings.out / "summary.json", result.summary())
             write_text(settings.out / "report.txt", result.format_table() + "\n")
-            save_figure(plot_fault_intensities(result), settings.out / "faults")
+            save_figure(result.plot(), settings.out / "faults")
     return result
 
 
