@@ -354,7 +354,10 @@ def diagnose(
         accuracy=accuracy,
     )
     samples = {str(n): tree["posterior"][n].values.ravel() for n in tree["posterior"].data_vars}
-    intensities = {f.name: f.intensity(samples, commissioned) for f in FAULTS}
+    n_commissioning = posterior.sizes["chain"] * posterior.sizes["draw"]
+    picks = np.random.default_rng(seed).integers(0, n_commissioning, len(samples[CHARGE]))
+    paired = {pid: posterior[pid].values.ravel()[picks] for pid in commissioned}
+    intensities = {f.name: f.intensity(samples, paired) for f in FAULTS}
     probabilities = {f.name: float(np.mean(intensities[f.name] >= f.threshold)) for f in FAULTS}
     text, pairs = verdict(probabilities)
     by_name = {f.name: f for f in FAULTS}

@@ -4,7 +4,8 @@ fault-detection literature scores protocols (Yuill and Braun).
 Each *unit* is a truth of a real-units variant (:mod:`pymc_vcc.studies.truths`: finer coils,
 sensor errors, drifted parameters...). It is commissioned once (a record of the healthy unit
 calibrated with :func:`~pymc_vcc.studies.unit_log.calibrate_record`), then recorded again in
-every *case* of :data:`CASES` (no fault, or one fault at a stated severity; other noise) and
+every *case* of :data:`CASES` (no fault, or one fault at a stated severity; the same sensors,
+other noise) and
 each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A case is scored
 
 * no-fault cases: ``false alarm`` when a fault is named, else ``correct``;
@@ -244,6 +245,7 @@ def fault_benchmark(
                     charge=charge,
                     parameters=_faulted(healthy.parameters, fault_name, intensity),
                     n_volumes=healthy.n_volumes,
+                    sensors=healthy,
                 )
                 diagnosis = diagnose(
                     later.observed,

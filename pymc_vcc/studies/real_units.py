@@ -9,10 +9,10 @@ mean absolute error of the posterior mean, the median width of the 95 % interval
 fraction of intervals covering the true charge, simulations and wall time per dataset, and
 the outputs the predictive check flagged.
 
-With ``alarm`` each unit is also recorded twice more, unchanged and with 20 % of its charge lost
-(same unit, other noise), and each later record is calibrated with the commissioning posterior
-as prior (:func:`~pymc_vcc.studies.unit_log.commissioning_prior`): the leak alarm's false-alarm
-rate on unchanged units and its detection rate at a 20 % loss.
+With ``alarm`` each unit is also recorded twice more, unchanged and with 20 % of its charge
+lost (same unit and sensors, other noise), and each later record is calibrated with the
+commissioning posterior as prior (:func:`~pymc_vcc.studies.unit_log.commissioning_prior`):
+the leak alarm's false-alarm rate on unchanged units and its detection rate at a 20 % loss.
 
 Each finished dataset is appended to ``<out>/checkpoints/validate-real-units.jsonl`` as it
 completes; ``resume`` skips the datasets already there.
@@ -119,6 +119,7 @@ def _dataset(variant, seed, executor, settings, budget, alarm, unit) -> dict:
             charge=charge,
             parameters=truth.parameters,
             n_volumes=truth.n_volumes,
+            sensors=truth,
         )
         later_tree, _ = _calibrated(later, executor, settings, budget, prior)
         draws_kg = later_tree["posterior"][CHARGE].values.ravel()

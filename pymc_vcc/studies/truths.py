@@ -66,6 +66,8 @@ class Truth:
         n_volumes: volumes per coil of the true unit.
         lags: sensor time constants, s (output -> τ; empty without lags).
         biases: sensor offsets in SI units (output -> offset; empty without biases).
+        input_offsets: the logged inputs' constant errors (input -> K or fraction; empty
+            when the inputs are logged exactly).
     """
 
     variant: str
@@ -76,6 +78,7 @@ class Truth:
     n_volumes: int
     lags: dict[str, float] = field(default_factory=dict)
     biases: dict[str, float] = field(default_factory=dict)
+    input_offsets: dict[str, float] = field(default_factory=dict)
 
 
 def _uniform(rng: np.random.Generator, bound: float) -> float:
@@ -96,15 +99,20 @@ def drifted_parameters(
     return moved
 
 
-def logged_inputs(inputs: xr.Dataset, rng: np.random.Generator) -> xr.Dataset:
-    """The inputs as a logger reads them: a constant error per input within its accuracy, plus
-    an error of a third of that per held step."""
+def logged_inputs(
+    inputs: xr.Dataset,
+    rng: np.random.Generator,
+    offsets: Mapping[str, float] | None = None,
+) -> tuple[xr.Dataset, dict[str, float]]:
+    """The inputs as a logger reads them, and each input's constant error: drawn within its
+    accuracy (or the given ``offsets``, the same logger's), plus an error of a third of that
+    accuracy per held step."""
     rows = inputs["time"].size
-    errors = {
-        name: _uniform(rng, bound) + rng.uniform(-bound / 3, bound / 3, rows)
-        for name, (_, bound) in ACCURACY.inputs.items()
-    }
-    return ACCURACY.shift_inputs(inputs, errors)
+    constant, errors = {}, {}
+    for name, (_, bound) in ACCURACY.inputs.items():
+        constant[name] = _uniform(rng, bound) if offsets is None else offsets[name]
+        errors[name] = constant[name] + rng.uniform(-bound / 3, bound / 3, rows)
+    return ACCURACY.shift_inputs(inputs, errors), constant
 
 
 def generate_truth(
@@ -118,6 +126,7 @@ def generate_truth(
     parameters: Mapping[str, float] | None = None,
     n_volumes: int | None = None,
     solver: str | Solver = "cvode",
+    sensors: Truth | None = None,
 ) -> Truth:
     """Draw a true unit of ``variant`` and the record its logger would write.
 
@@ -132,6 +141,9 @@ def generate_truth(
             ``drift`` and ``all``); overrides the drift where given.
         n_volumes: volumes per coil of the true unit (default: the variant's draw).
         solver: ODE solver of the truth's simulation.
+        sensors: an earlier record of the same unit: its sensors' lags and biases and its
+            logger's constant input errors are kept (only the noise is new), as on a unit
+            recorded again months later.
 
     Raises:
         ValueError: unknown variant.
@@ -157,19 +169,26 @@ def generate_truth(
             f"the true unit's simulation ({variant}, seed {seed}) failed: "
             f"{clean.attrs['failure_reason']}"
         )
-    logged = logged_inputs(true_inputs, rng) if every or variant == "inputs" else true_inputs
+    logged, input_offsets = true_inputs, {}
+    if every or variant == "inputs":
+        earlier = None if sensors is None else sensors.input_offsets
+        logged, input_offsets = logged_inputs(true_inputs, rng, earlier)
     read = clean.copy()
     dt = float(np.diff(clean["time"].values[:2])[0])
     lags, biases = {}, {}
     for name in clean.data_vars:
         values = np.asarray(clean[name].values, dtype=float)
         if every or variant == "lag":
-            lags[name] = float(rng.uniform(*LAG_RANGE))
+            tau = rng.uniform(*LAG_RANGE) if sensors is None else sensors.lags[name]
+            lags[name] = float(tau)
             values = lagged(values[None, :], np.array([lags[name]]), dt)[0]
         if every or variant == "bias":
-            bound, relative = ACCURACY.bias_bound(clean[name].attrs["units"])
-            error = _uniform(rng, bound)
-            biases[name] = error * float(np.mean(values)) if relative else error
+            if sensors is None:
+                bound, relative = ACCURACY.bias_bound(clean[name].attrs["units"])
+                error = _uniform(rng, bound)
+                biases[name] = error * float(np.mean(values)) if relative else error
+            else:
+                biases[name] = sensors.biases[name]
             values = values + biases[name]
         read[name] = clean[name].copy(data=values)
     observed = SensorNoise.typical().measure(read, rng)
@@ -182,4 +201,5 @@ def generate_truth(
         n_volumes=n_volumes,
         lags=lags,
         biases=biases,
+        input_offsets=input_offsets,
     )

@@ -73,3 +73,18 @@ def test_a_second_round_draws_the_model_error_at_the_first_posterior():
     smc = int(stats["simulations"].sum())
     assert int(stats["n_simulations"]) >= smc + 2 * 3 * 12  # both rounds' model-error draws
     assert 0.9 <= float(tree["posterior"]["M0"].mean()) <= 2.2
+
+
+def test_a_later_record_keeps_the_units_sensors_and_logger():
+    """Months later the same sensors read: the same lags, biases and constant input errors,
+    only the noise is new."""
+    first = generate_truth("all", seed=8, charge=CHARGE, t_end=300.0)
+    later = generate_truth(
+        "all", seed=9, charge=CHARGE, t_end=300.0, parameters=first.parameters,
+        n_volumes=first.n_volumes, sensors=first,
+    )  # fmt: skip
+    assert later.lags == first.lags and later.biases == first.biases
+    assert later.input_offsets == first.input_offsets and first.input_offsets
+    assert not np.array_equal(later.observed["TD"].values, first.observed["TD"].values)
+    fresh = generate_truth("all", seed=9, charge=CHARGE, t_end=300.0, parameters=first.parameters)
+    assert fresh.biases != first.biases
