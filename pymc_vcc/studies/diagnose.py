@@ -4,10 +4,11 @@ A later record is calibrated (:func:`~pymc_vcc.studies.unit_log.calibrate_record
 error budget) with the commissioning posterior as prior, every parameter a fault moves left
 free (uniform on its bounds) and the cycle's fault parameters (``unit.faults``: a liquid-line
 restriction, non-condensable gas) added. Each fault of :data:`FAULTS` is then an *intensity*
-relative to commissioning, per posterior draw: a fraction of the commissioned value for the
-faults that move a calibration parameter (the charge, the condenser's air side, the indoor
-airflow, the compressor's volumetric efficiency), the fault parameter itself for the others.
-Its posterior probability of lying beyond the fault's threshold names it
+relative to commissioning, per posterior draw (each paired with a draw of the commissioning
+posterior, so that what commissioning left unknown widens it): a fraction of the commissioned
+value for the faults that move a calibration parameter (the charge, the condenser's air-side
+conductance, the indoor airflow, the compressor's volumetric efficiency), the fault parameter
+itself for the others. Its posterior probability of lying beyond the fault's threshold names it
 (:data:`NAMED`); two faults that together are likely but neither alone are reported as not
 distinguishable, with the sensor that would tell them apart (:func:`separating_sensor`).
 
@@ -20,7 +21,7 @@ non-condensable gas.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,6 +30,7 @@ from matplotlib.figure import Figure
 
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.error_model import SensorAccuracy, plateau_windows, summarise
+from pymc_vcc.physics.cycles.split_unit import air_conductance
 from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
@@ -47,12 +49,15 @@ class Fault:
 
     Attributes:
         name: what a service engineer calls it.
-        parameters: the parameters it moves (its intensity is the largest of theirs).
+        parameters: the parameters it moves (left free of the commissioning posterior; its
+            intensity is the largest of their moves, unless it has a :attr:`measure`).
         direction: −1 if the fault lowers them, +1 if it raises them.
         threshold: the smallest intensity that counts as the fault.
         relative: intensity as a fraction of the commissioned value (else in the parameter's
             own unit, from 0: a fault parameter is 0 on a healthy unit).
         display: (unit, factor) of the intensity in the report (``("%", 100)``, ...).
+        measure: the quantity of the unit the intensity is taken on instead (unit, parameter
+            draws -> values), when the data see a combination of the parameters, not each.
     """
 
     name: str
@@ -61,14 +66,28 @@ class Fault:
     threshold: float
     relative: bool = True
     display: tuple[str, float] = ("%", 100.0)
+    measure: Callable[[Unit, Mapping[str, np.ndarray]], np.ndarray] | None = None
 
-    def intensity(self, draws: Mapping[str, np.ndarray], commissioned: Mapping[str, float]):
+    def intensity(
+        self,
+        draws: Mapping[str, np.ndarray],
+        commissioned: Mapping[str, np.ndarray],
+        unit: Unit | None = None,
+    ) -> np.ndarray:
         """The fault's intensity per posterior draw.
 
         Args:
             draws: parameter -> its posterior draws.
-            commissioned: parameter -> its commissioning value (relative faults).
+            commissioned: parameter -> its value at commissioning (relative faults), one
+                commissioning posterior draw paired with each of ``draws``.
+            unit: the unit, for a fault measured on a quantity derived from the parameters
+                (:attr:`measure`).
         """
+        if self.measure is not None:
+            if unit is None:
+                raise ValueError(f"the intensity of {self.name!r} is measured on the unit")
+            before = self.measure(unit, commissioned)
+            return self.direction * (self.measure(unit, draws) / before - 1.0)
         moves = []
         for pid in self.parameters:
             if self.relative:
@@ -78,17 +97,43 @@ class Fault:
         return np.max(moves, axis=0)
 
 
+def condenser_conductance(unit: Unit, draws: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The condenser's effective air-side conductance of each draw, W/K
+    (:func:`~pymc_vcc.physics.cycles.split_unit.air_conductance`; parameters not drawn at
+    nominal).
+
+    Args:
+        unit: the unit.
+        draws: parameter -> values, one per draw (ids of neither table are ignored).
+    """
+    known = [pid for pid in draws if pid in unit.parameters.ids or pid in unit.faults.ids]
+    n = len(draws[known[0]])
+    values = np.empty(n)
+    for k in range(n):
+        theta, faults = unit.parameter_vectors({pid: float(draws[pid][k]) for pid in known})
+        constants = unit.cycle_model.constants(unit, theta, faults=faults)
+        values[k] = air_conductance(constants, "condenser", unit.discretisation.n_volumes)
+    return values
+
+
 FAULTS: tuple[Fault, ...] = (
     Fault("undercharge", (CHARGE,), -1, 0.10),
     Fault("overcharge", (CHARGE,), +1, 0.10),
-    Fault("condenser fouling or low outdoor airflow", ("HTC_CA", "FO_FLOW"), -1, 0.20),
+    Fault(
+        "condenser fouling or low outdoor airflow",
+        ("HTC_CA", "FO_FLOW"),
+        -1,
+        0.20,
+        measure=condenser_conductance,
+    ),
     Fault("low indoor airflow", ("FI_FLOW",), -1, 0.20),
     Fault("compressor valve leakage", ("CF_VOL",), -1, 0.10),
     Fault("liquid-line restriction", ("DP_RESTR",), +1, 50e3, False, ("kPa", 1e-3)),
     Fault("non-condensable gas", ("P_NCG",), +1, 50e3, False, ("kPa", 1e-3)),
 )
 """The standard faults and their detection thresholds: charge ±10 % (the field's tolerance),
-airflow or air-side conductance −20 %, volumetric efficiency −10 %, a restriction of 50 kPa at
+the condenser's air-side conductance (fouling and outdoor airflow lower it alike) or the indoor
+airflow −20 %, volumetric efficiency −10 %, a restriction of 50 kPa at
 the rated flow, 50 kPa of non-condensable gas (about 2 % of the condensing pressure: twice a
 pressure sensor's accuracy)."""
 
@@ -357,7 +402,7 @@ def diagnose(
     n_commissioning = posterior.sizes["chain"] * posterior.sizes["draw"]
     picks = np.random.default_rng(seed).integers(0, n_commissioning, len(samples[CHARGE]))
     paired = {pid: posterior[pid].values.ravel()[picks] for pid in commissioned}
-    intensities = {f.name: f.intensity(samples, paired) for f in FAULTS}
+    intensities = {f.name: f.intensity(samples, paired, unit) for f in FAULTS}
     probabilities = {f.name: float(np.mean(intensities[f.name] >= f.threshold)) for f in FAULTS}
     text, pairs = verdict(probabilities)
     by_name = {f.name: f for f in FAULTS}

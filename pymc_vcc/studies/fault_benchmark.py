@@ -31,27 +31,36 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import FAULTS, diagnose
+from pymc_vcc.studies.record_budget import CHARGE
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
 from pymc_vcc.studies.unit_log import RECORD_BUDGETS, calibrate_record, record_budget_name
 
-CASES: tuple[tuple[str | None, float], ...] = (
-    (None, 0.0),
-    ("undercharge", 0.20),
-    ("undercharge", 0.30),
-    ("overcharge", 0.20),
-    ("condenser fouling or low outdoor airflow", 0.40),
-    ("low indoor airflow", 0.40),
-    ("compressor valve leakage", 0.25),
-    ("liquid-line restriction", 150e3),
-    ("non-condensable gas", 120e3),
-)
-"""(fault, true intensity) of each later record of a unit: none, or one fault at a severity
-well above its detection threshold (a fraction of the commissioned value, or Pa)."""
+Case = tuple[str | None, dict[str, float]]
+"""A later record: its fault (None: none) and the changes that make it, id -> a fraction of
+the healthy unit's value (calibration parameters) or the value itself (fault parameters)."""
 
-UNIT_CHARGES = (1.2, 1.7)  # kg: a unit's commissioned charge is drawn between these
-"""Commissioned charges leave room for a 30 % loss and a 20 % gain inside the unit's box."""
+CASES: tuple[Case, ...] = (
+    (None, {}),
+    ("undercharge", {"M0": -0.20}),
+    ("undercharge", {"M0": -0.30}),
+    ("overcharge", {"M0": 0.20}),
+    ("condenser fouling or low outdoor airflow", {"HTC_CA": -0.60}),
+    ("condenser fouling or low outdoor airflow", {"FO_FLOW": -0.30}),
+    ("low indoor airflow", {"FI_FLOW": -0.40}),
+    ("compressor valve leakage", {"CF_VOL": -0.25}),
+    ("liquid-line restriction", {"DP_RESTR": 150e3}),
+    ("non-condensable gas", {"P_NCG": 120e3}),
+)
+"""The later records of each unit: none, or one fault above its detection threshold (fouling
+and low outdoor airflow each once: 60 % off the air-side HTC and 30 % off the outdoor airflow
+take 30 % and 26 % off the condenser's air-side conductance)."""
+
+UNIT_CHARGES = (1.3, 1.8)  # kg: a unit's commissioned charge is drawn between these
+"""Commissioned charges leave room for a 30 % loss and a 20 % gain inside the unit's box
+(0.9-2.2 kg)."""
 RUNS_CHECKPOINT = "validate-faults"
 
 
@@ -115,7 +124,7 @@ def score(fault: str | None, verdict: str) -> str:
     return "misdiagnosis" if named else "no response"
 
 
-def _case_row(fault_name, intensity, diagnosis) -> dict:
+def _case_row(fault_name: str | None, intensity: float, diagnosis) -> dict:
     row = {
         "fault": fault_name,
         "true_intensity": intensity,
@@ -137,18 +146,24 @@ def _case_row(fault_name, intensity, diagnosis) -> dict:
     return row
 
 
-def _faulted(parameters: dict[str, float], fault_name: str | None, intensity: float) -> dict:
-    """The unit's parameters with the fault at ``intensity``."""
-    if fault_name is None:
-        return dict(parameters)
-    fault = {f.name: f for f in FAULTS}[fault_name]
+def _faulted(unit, parameters: dict[str, float], case: Case) -> tuple[dict[str, float], float]:
+    """The unit's parameters in ``case`` (the charge apart, kg), and the fault's true
+    intensity."""
+    fault_name, changes = case
     moved = dict(parameters)
-    for pid in fault.parameters:
-        if fault.relative:
-            moved[pid] = parameters[pid] * (1 + fault.direction * intensity)
-        else:
-            moved[pid] = fault.direction * intensity
-    return moved
+    for pid, change in changes.items():
+        moved[pid] = change if pid in unit.faults.ids else parameters[pid] * (1 + change)
+    if fault_name is None:
+        return moved, 0.0
+    fault = {f.name: f for f in FAULTS}[fault_name]
+    before = {pid: np.array([parameters.get(pid, 0.0)]) for pid in moved}
+    after = {pid: np.array([value]) for pid, value in moved.items()}
+    return moved, float(fault.intensity(after, before, unit)[0])
+
+
+def _label(case: Case) -> str:
+    fault_name, changes = case
+    return f"{fault_name}: {json.dumps(changes, sort_keys=True)}"
 
 
 def summarise_cases(rows: Sequence[dict]) -> dict:
@@ -198,7 +213,7 @@ def fault_benchmark(
     settings: StudySettings,
     variant: str = "all",
     n_units: int = 12,
-    cases: Sequence[tuple[str | None, float]] = CASES,
+    cases: Sequence[Case] = CASES,
 ) -> FaultBenchmarkResult:
     """Run the benchmark (see the module docstring).
 
@@ -206,7 +221,7 @@ def fault_benchmark(
         settings: where and how it runs; its budget is each calibration's.
         variant: the truth variant of every unit (:data:`~pymc_vcc.studies.truths.VARIANTS`).
         n_units: units, each commissioned once and recorded in every case.
-        cases: (fault name or None, true intensity) of each later record.
+        cases: the later records of each unit (:data:`CASES`).
     """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
@@ -224,26 +239,29 @@ def fault_benchmark(
     if log is not None and log.is_file():
         for line in log.read_text().splitlines():
             row = json.loads(line)
-            done[(row["unit_seed"], row["fault"], row["true_intensity"], row["budget"])] = row
+            done[(row["unit_seed"], row["case"], row["budget"])] = row
+    unit = load_unit()
     runs = []
     with settings.open_executor() as executor:
         for k in range(n_units):
             seed = settings.seed + 100 * k
-            runs += [done[(seed, f, i, budget)] for f, i in cases if (seed, f, i, budget) in done]
-            if all((seed, f, i, budget) in done for f, i in cases):
+            keys = [(seed, _label(case), budget) for case in cases]
+            runs += [done[key] for key in keys if key in done]
+            if all(key in done for key in keys):
                 continue
             charge = float(np.random.default_rng(seed).uniform(*UNIT_CHARGES))
             healthy = generate_truth(variant, seed, charge=charge)
             commissioning = _commissioned(healthy, seed, executor, settings, budget, coils, log)
-            for n, (fault_name, intensity) in enumerate(cases):
-                if (seed, fault_name, intensity, budget) in done:
+            for n, (case, key) in enumerate(zip(cases, keys, strict=True)):
+                if key in done:
                     continue
                 case_started = time.perf_counter()
+                parameters, intensity = _faulted(unit, healthy.parameters, case)
                 later = generate_truth(
                     variant,
                     seed + n + 1,
-                    charge=charge,
-                    parameters=_faulted(healthy.parameters, fault_name, intensity),
+                    charge=parameters[CHARGE],
+                    parameters=parameters,
                     n_volumes=healthy.n_volumes,
                     sensors=healthy,
                 )
@@ -257,7 +275,8 @@ def fault_benchmark(
                     solver=settings.solver or "cvode",
                     coils=coils,
                 )
-                row = _case_row(fault_name, intensity, diagnosis) | {
+                row = _case_row(case[0], intensity, diagnosis) | {
+                    "case": key[1],
                     "unit_seed": seed,
                     "variant": variant,
                     "truth_kg": charge,
@@ -280,7 +299,8 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.D
     """The commissioning posterior of a unit's healthy record, kept beside the checkpoint."""
     from pymc_vcc.studies.common import write_netcdf
 
-    kept = None if log is None else log.with_name(f"{log.stem}-unit-{seed}-{budget}.nc")
+    unit = f"unit-{seed}-{healthy.variant}-{healthy.charge:.4f}kg-{budget}"
+    kept = None if log is None else log.with_name(f"{log.stem}-{unit}.nc")
     if kept is not None and kept.is_file():
         return xr.open_datatree(kept, engine="h5netcdf")
     draws, error_draws = RECORD_BUDGETS[budget]

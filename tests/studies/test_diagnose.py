@@ -3,25 +3,41 @@
 import numpy as np
 import pytest
 
-from pymc_vcc.studies.diagnose import FAULTS, NAMED, Fault, verdict
+from pymc_vcc.studies.diagnose import FAULTS, NAMED, verdict
 
 
 def test_intensity_is_relative_to_commissioning_or_the_fault_parameter_itself():
-    draws = {"M0": np.array([1.8, 1.5]), "HTC_CA": np.array([40.0, 50.0]),
-             "FO_FLOW": np.array([0.6, 0.3]), "P_NCG": np.array([2e4, 6e4])}  # fmt: skip
-    commissioned = {"M0": 2.0, "HTC_CA": 50.0, "FO_FLOW": 0.5}
+    draws = {"M0": np.array([1.8, 1.5]), "P_NCG": np.array([2e4, 6e4])}
+    commissioned = {"M0": np.array([2.0, 2.0])}
     by_name = {fault.name: fault for fault in FAULTS}
     under = by_name["undercharge"].intensity(draws, commissioned)
     assert under == pytest.approx([0.10, 0.25])
     assert by_name["overcharge"].intensity(draws, commissioned) == pytest.approx([-0.10, -0.25])
-    # the larger of the two moves of the condenser's air side
-    fouling = by_name["condenser fouling or low outdoor airflow"].intensity(draws, commissioned)
-    assert fouling == pytest.approx([0.2, 0.4])
     assert by_name["non-condensable gas"].intensity(draws, commissioned) == pytest.approx(
         [2e4, 6e4]
     )
-    rising = Fault("x", ("M0",), +1, 0.1)
-    assert rising.intensity(draws, commissioned) == pytest.approx([-0.1, -0.25])
+
+
+def test_fouling_and_low_outdoor_airflow_are_one_drop_of_the_condensers_conductance():
+    """The data see the condenser's air-side conductance, not its HTC and its airflow apart:
+    the fault's intensity is that conductance's drop, which either lowers, less than in
+    proportion (ε-NTU)."""
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.diagnose import condenser_conductance
+
+    unit = load_unit()
+    htc, flow = unit.parameters["HTC_CA"].nominal, unit.parameters["FO_FLOW"].nominal
+    healthy = {"HTC_CA": np.array([htc] * 3), "FO_FLOW": np.array([flow] * 3)}
+    faulty = {"HTC_CA": np.array([htc, 0.6 * htc, htc]),
+              "FO_FLOW": np.array([flow, flow, 0.6 * flow])}  # fmt: skip
+    conductance = condenser_conductance(unit, healthy)
+    assert 100.0 < conductance[0] < 1e5 and np.ptp(conductance) == 0.0  # W/K
+    fault = {f.name: f for f in FAULTS}["condenser fouling or low outdoor airflow"]
+    drops = fault.intensity(faulty, healthy, unit)
+    assert drops[0] == pytest.approx(0.0, abs=1e-12)
+    assert 0.0 < drops[1] < 0.4 and 0.0 < drops[2] < 0.4
+    with pytest.raises(ValueError, match="measured on the unit"):
+        fault.intensity(faulty, healthy)
 
 
 def test_every_standard_fault_is_diagnosed_from_a_parameter_of_the_cycle():
@@ -96,11 +112,12 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     from pymc_vcc.studies import StudySettings
     from pymc_vcc.studies.fault_benchmark import fault_benchmark
 
-    cases = [(None, 0.0), ("non-condensable gas", 150e3)]
+    cases = [(None, {}), ("non-condensable gas", {"P_NCG": 150e3})]
     settings = StudySettings(budget="smoke", out=tmp_path / "faults", n_workers=2)
     first = fault_benchmark(settings, "model", 1, cases)
     assert [r["fault"] for r in first.runs] == [None, "non-condensable gas"]
     gas = first.runs[1]
+    assert gas["true_intensity"] == 150e3
     assert gas["intensity_low"] <= gas["intensity_mean"] <= gas["intensity_high"]
     assert gas["score"] in ("correct diagnosis", "misdiagnosis", "missed detection", "no response")
     kept = list((tmp_path / "faults" / "checkpoints").glob("validate-faults-unit-*.nc"))
@@ -112,3 +129,22 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
         cases,
     )
     assert again.runs == first.runs and again.wall_seconds < 30
+
+
+def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.fault_benchmark import CASES, _faulted
+
+    unit = load_unit()
+    healthy = {spec.id: spec.nominal for spec in unit.parameters} | {"M0": 1.5}
+    for case in CASES:
+        moved, intensity = _faulted(unit, healthy, case)
+        fault, changes = case
+        if fault is None:
+            assert moved == healthy and intensity == 0.0
+            continue
+        threshold = {f.name: f.threshold for f in FAULTS}[fault]
+        assert intensity > threshold  # every case lies beyond its fault's detection threshold
+        if fault == "undercharge":
+            assert moved["M0"] == pytest.approx(1.5 * (1 + changes["M0"]))
+            assert intensity == pytest.approx(-changes["M0"])

@@ -30,7 +30,7 @@ from pymc_vcc.physics.components.compressor import (
     volumetric_efficiency,
 )
 from pymc_vcc.physics.components.fan import air_capacity_rate, fan_operating_point
-from pymc_vcc.physics.components.heat_transfer import FLUX_KINKS, cell_heat
+from pymc_vcc.physics.components.heat_transfer import FLUX_KINKS, air_effectiveness, cell_heat
 from pymc_vcc.physics.components.pipe import (
     friction_coefficient,
     pipe_volume,
@@ -426,6 +426,19 @@ def split_unit_constants(
         },
     }
     return record_array(split_unit_dtype(layout), values)
+
+
+def air_conductance(
+    constants: np.ndarray, coil: Literal["condenser", "evaporator"], n_cells: int
+) -> float:
+    """A coil's effective air-side conductance in a constants record, W/K: n C (1 − e^(−hA/C))
+    over its ``n_cells`` cells, the heat its air takes per kelvin between the inlet air and the
+    wall. Fouling (its HTC) and airflow (its fan's flow) both lower it; the data see it, not
+    each of the two (the air side's ε-NTU, models/README.md)."""
+    record = constants[0][coil]
+    capacity = float(record["air_capacity"])
+    effectiveness = air_effectiveness(capacity, float(record["htc_air"]), float(record["air_area"]))
+    return n_cells * capacity * effectiveness
 
 
 @functools.cache
