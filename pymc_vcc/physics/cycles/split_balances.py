@@ -129,16 +129,19 @@ def evaluate(y, u, constants, tables, dydt, out):
 @njit(cache=True, error_model="numpy")
 def remembered_cell_heat(memo, row, tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T):
     """:func:`coil_cell_heat`, taken from row ``row`` of ``memo`` when the row holds these same
-    arguments (the coil and tables aside) and worked out afresh otherwise. With ``memo`` None it
+    arguments (the coil and tables aside) and worked out afresh otherwise. The heat is
+    proportional to the flow ``scale`` (it multiplies the refrigerant-side HTC), so a row that
+    differs in the scale alone gives its heat rescaled: a Jacobian column that moves only the
+    flows (the cell sums, a zone's last cell) then works out no heat. With ``memo`` None it
     always works it out; a row of NaN matches nothing."""
     if memo is None:
         return coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T)
     m = memo[row]
     if (
-        m[0] == p and m[1] == T_wall and m[2] == scale and m[3] == h_in and m[4] == x_in
+        m[0] == p and m[1] == T_wall and m[3] == h_in and m[4] == x_in
         and m[5] == T_in and m[6] == h and m[7] == x and m[8] == T
     ):  # fmt: skip
-        return m[9]
+        return m[9] if m[2] == scale else m[9] * (scale / m[2])
     return coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T)
 
 
@@ -432,8 +435,9 @@ def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
     coil), W. Each zone's rates read its own cells and walls and ``flow`` alone.
 
     ``memo`` (2 N rows of :data:`MEMO_COLUMNS`: condenser cells, then evaporator cells) holds
-    coil cell heats with their arguments: a cell whose arguments match its row reuses the heat
-    (a Jacobian column changes few cells); with ``remember`` the rows take this call's."""
+    coil cell heats with their arguments: a cell whose arguments match its row reuses the heat,
+    rescaled if the flow scale alone differs (a Jacobian column changes few cells); with
+    ``remember`` the rows take this call's."""
     src_c, src_e, q_cond, q_evap, q_sensible, q_latent = coil_rates(
         y, u, c, tables, props, flow, dydt, memo, remember
     )
