@@ -126,7 +126,7 @@ def evaluate(y, u, constants, tables, dydt, out):
     return balances(y, u, c, tables, props, dydt, out)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def remembered_cell_heat(memo, row, tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T):
     """:func:`coil_cell_heat`, taken from row ``row`` of ``memo`` when the row holds these same
     arguments (the coil and tables aside) and worked out afresh otherwise. The heat is
@@ -134,14 +134,13 @@ def remembered_cell_heat(memo, row, tables, sat, p, coil, T_wall, scale, h_in, x
     differs in the scale alone gives its heat rescaled: a Jacobian column that moves only the
     flows (the cell sums, a zone's last cell) then works out no heat. With ``memo`` None it
     always works it out; a row of NaN matches nothing."""
-    if memo is None:
-        return coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T)
-    m = memo[row]
-    if (
-        m[0] == p and m[1] == T_wall and m[3] == h_in and m[4] == x_in
-        and m[5] == T_in and m[6] == h and m[7] == x and m[8] == T
-    ):  # fmt: skip
-        return m[9] if m[2] == scale else m[9] * (scale / m[2])
+    if memo is not None:
+        m = memo[row]
+        if (
+            m[0] == p and m[1] == T_wall and m[3] == h_in and m[4] == x_in
+            and m[5] == T_in and m[6] == h and m[7] == x and m[8] == T
+        ):  # fmt: skip
+            return m[9] if m[2] == scale else m[9] * (scale / m[2])
     return coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T)
 
 
