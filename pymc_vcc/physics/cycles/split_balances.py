@@ -444,6 +444,14 @@ def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
     return q_cond, q_evap, q_sensible, q_latent
 
 
+@njit(cache=True, error_model="numpy")
+def held_rates(y, u, c, tables, props, flow, dydt, memo, remember):
+    """:func:`rates` with a memo, for :func:`jacobian`: one compiled copy of the rates (and of
+    the coil heats inlined in them) that its evaluations share, where an inlined copy at each
+    of its calls doubled the cycle's compile time."""
+    rates(y, u, c, tables, props, flow, dydt, memo, remember)
+
+
 @njit(cache=True, error_model="numpy", inline="always")
 def write_outputs(y, c, props, flow, q_cond, q_evap, q_sensible, q_latent, out):
     """The outputs and the diagnostics into ``out`` at their offsets (:data:`OUT`), from the
@@ -548,7 +556,7 @@ def jacobian(y, u, constants, tables, f0):
     fillets = (fillet_memo(), fillet_memo())
     sums = cell_sums(c, props)
     held = flows(y, u, c, tables, props, sums)
-    rates(y, u, c, tables, props, held, dydt, memo, True)  # the cells' heats at y
+    held_rates(y, u, c, tables, props, held, dydt, memo, True)  # the cells' heats at y
 
     # how f answers each sum, through the flows
     through_sums = np.empty((N_SUMS, y.size))
@@ -557,7 +565,7 @@ def jacobian(y, u, constants, tables, f0):
         step = 1e-7 * abs(moved[k])
         moved[k] += step
         flow = flows(y, u, c, tables, props, (moved[0], moved[1], moved[2]))
-        rates(y, u, c, tables, props, flow, dydt, memo)
+        held_rates(y, u, c, tables, props, flow, dydt, memo, False)
         for i in range(y.size):
             through_sums[k, i] = (dydt[i] - f0[i]) / step
 
@@ -565,7 +573,7 @@ def jacobian(y, u, constants, tables, f0):
     for j in coupled:
         step = perturb(y, work, j, zones, tables, props, fillet_memo())
         flow = flows(work, u, c, tables, props, cell_sums(c, props))
-        rates(work, u, c, tables, props, flow, dydt, memo)
+        held_rates(work, u, c, tables, props, flow, dydt, memo, False)
         for i in range(y.size):
             jac[i, j] = (dydt[i] - f0[i]) / step
         restore(y, work, j, zones, props, saved)
@@ -583,7 +591,7 @@ def jacobian(y, u, constants, tables, f0):
                 for k in range(N_SUMS):
                     shifts[side, k] = after[k] - before[k]
                 before = after
-        rates(work, u, c, tables, props, held, dydt, memo)
+        held_rates(work, u, c, tables, props, held, dydt, memo, False)
         for side in range(2):
             if m >= sides[side].size:
                 continue
