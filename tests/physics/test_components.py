@@ -355,6 +355,13 @@ def test_coil_cell_heat_is_exact_across_blends_and_saturation_lines(tables):
         tables, saturation_point(tables, p), p, coil, T_wall, 1.0, *inside[0], *inside[1]
     ) == pytest.approx(plain, rel=1e-12)
 
+    # proportional to the flow scale, across every stretch: the Jacobian rescales a remembered
+    # heat when a column moves the flows alone
+    for scale in (0.05, 0.37, 2.0):
+        assert coil_cell_heat(
+            tables, saturation_point(tables, p), p, coil, T_wall, scale, *ends[0], *ends[1]
+        ) == pytest.approx(scale * heat / flow_scale(1.0), rel=1e-14)
+
 
 def test_soft_cap():
     assert soft_cap(0.0, 1.0) == 0.0

@@ -145,7 +145,7 @@ def _band_centre(x: float, band: float) -> float:
     return -1.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def cell_state(
     tables, sat: SaturationPoint, p: float, h: float, memo: np.ndarray
 ) -> tuple[float, float, float, float, float]:
@@ -164,7 +164,7 @@ def cell_state(
     return T, rho, drho_dp, drho_dh, x
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def cell_values(
     tables, sat: SaturationPoint, p: float, h: float, memo: np.ndarray
 ) -> tuple[float, float, float]:

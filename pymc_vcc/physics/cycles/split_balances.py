@@ -131,19 +131,21 @@ def evaluate(y, u, constants, tables, dydt, out):
     return balances(y, u, c, tables, props, dydt, out)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def remembered_cell_heat(memo, row, tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T):
     """:func:`coil_cell_heat`, taken from row ``row`` of ``memo`` when the row holds these same
-    arguments (the coil and tables aside) and worked out afresh otherwise. With ``memo`` None it
+    arguments (the coil and tables aside) and worked out afresh otherwise. The heat is
+    proportional to the flow ``scale`` (it multiplies the refrigerant-side HTC), so a row that
+    differs in the scale alone gives its heat rescaled: a Jacobian column that moves only the
+    flows (the cell sums, a zone's last cell) then works out no heat. With ``memo`` None it
     always works it out; a row of NaN matches nothing."""
-    if memo is None:
-        return coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T)
-    m = memo[row]
-    if (
-        m[0] == p and m[1] == T_wall and m[2] == scale and m[3] == h_in and m[4] == x_in
-        and m[5] == T_in and m[6] == h and m[7] == x and m[8] == T
-    ):  # fmt: skip
-        return m[9]
+    if memo is not None:
+        m = memo[row]
+        if (
+            m[0] == p and m[1] == T_wall and m[3] == h_in and m[4] == x_in
+            and m[5] == T_in and m[6] == h and m[7] == x and m[8] == T
+        ):  # fmt: skip
+            return m[9] if m[2] == scale else m[9] * (scale / m[2])
     return coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T)
 
 
@@ -440,13 +442,22 @@ def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
     coil), W. Each zone's rates read its own cells and walls and ``flow`` alone.
 
     ``memo`` (2 N rows of :data:`MEMO_COLUMNS`: condenser cells, then evaporator cells) holds
-    coil cell heats with their arguments: a cell whose arguments match its row reuses the heat
-    (a Jacobian column changes few cells); with ``remember`` the rows take this call's."""
+    coil cell heats with their arguments: a cell whose arguments match its row reuses the heat,
+    rescaled if the flow scale alone differs (a Jacobian column changes few cells); with
+    ``remember`` the rows take this call's."""
     src_c, src_e, q_cond, q_evap, q_sensible, q_latent = coil_rates(
         y, u, c, tables, props, flow, dydt, memo, remember
     )
     zone_rates(y, c, props, flow, src_c, src_e, dydt)
     return q_cond, q_evap, q_sensible, q_latent
+
+
+@njit(cache=True, error_model="numpy")
+def held_rates(y, u, c, tables, props, flow, dydt, memo, remember):
+    """:func:`rates` with a memo, for :func:`jacobian`: one compiled copy of the rates (and of
+    the coil heats inlined in them) that its evaluations share, where an inlined copy at each
+    of its calls doubled the cycle's compile time."""
+    rates(y, u, c, tables, props, flow, dydt, memo, remember)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -553,7 +564,7 @@ def jacobian(y, u, constants, tables, f0):
     fillets = (fillet_memo(), fillet_memo())
     sums = cell_sums(c, props)
     held = flows(y, u, c, tables, props, sums)
-    rates(y, u, c, tables, props, held, dydt, memo, True)  # the cells' heats at y
+    held_rates(y, u, c, tables, props, held, dydt, memo, True)  # the cells' heats at y
 
     # how f answers each sum, through the flows
     through_sums = np.empty((N_SUMS, y.size))
@@ -562,7 +573,7 @@ def jacobian(y, u, constants, tables, f0):
         step = 1e-7 * abs(moved[k])
         moved[k] += step
         flow = flows(y, u, c, tables, props, (moved[0], moved[1], moved[2]))
-        rates(y, u, c, tables, props, flow, dydt, memo)
+        held_rates(y, u, c, tables, props, flow, dydt, memo, False)
         for i in range(y.size):
             through_sums[k, i] = (dydt[i] - f0[i]) / step
 
@@ -570,7 +581,7 @@ def jacobian(y, u, constants, tables, f0):
     for j in coupled:
         step = perturb(y, work, j, zones, tables, props, fillet_memo())
         flow = flows(work, u, c, tables, props, cell_sums(c, props))
-        rates(work, u, c, tables, props, flow, dydt, memo)
+        held_rates(work, u, c, tables, props, flow, dydt, memo, False)
         for i in range(y.size):
             jac[i, j] = (dydt[i] - f0[i]) / step
         restore(y, work, j, zones, props, saved)
@@ -588,7 +599,7 @@ def jacobian(y, u, constants, tables, f0):
                 for k in range(N_SUMS):
                     shifts[side, k] = after[k] - before[k]
                 before = after
-        rates(work, u, c, tables, props, held, dydt, memo)
+        held_rates(work, u, c, tables, props, held, dydt, memo, False)
         for side in range(2):
             if m >= sides[side].size:
                 continue

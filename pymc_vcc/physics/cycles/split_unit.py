@@ -556,7 +556,7 @@ def flow_through_drops(
     return m_b
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def coil_cell_heat(tables, sat, p, coil, T_wall, scale, h_in, x_in, T_in, h, x, T):
     """Heat from the wall to one coil cell's refrigerant, W: the cell-mean flux, its enthalpy
     running linearly from its inlet (``h_in``, ``x_in``, ``T_in``) to its own state (``h``,

@@ -37,9 +37,11 @@ from pymc_vcc.physics.unit import Unit
 ANNOUNCE_AFTER_SECONDS = 2.0
 """A warm-up still running after this long is a first compile: say so on screen, s."""
 
-TYPICAL_COMPILE_SECONDS = 40
-"""CPU time of a cold compile of the cycle model, s (37 s measured; the wall time grows with
-the machine's load: 62 to 500 s on a shared 2-core machine)."""
+TYPICAL_COMPILE_SECONDS = 50
+"""CPU time of a cold compile of the cycle model, s (37 s measured before the property lookups
+and coil heats were inlined into the right-hand side, which added a third: 95 against 70 s side
+by side on a loaded machine; the wall time grows with the machine's load: 62 to 500 s on a
+shared 2-core machine)."""
 
 PHYSICS_PACKAGE = physics.__name__
 """Every cached Numba kernel of the package is defined in the modules of this package."""

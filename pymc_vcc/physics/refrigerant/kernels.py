@@ -3,6 +3,10 @@
 Scalar floats in, floats out, SI units. Every kernel returns NaN (all of its outputs) when its
 input lies outside the tables, so a caller inside Numba can flag the failure; nothing is
 extrapolated.
+
+The lookups a right-hand side makes dozens of times (:func:`state_at`, :func:`state_values_at`)
+are inlined into their callers: as calls of their own, each passing the tables and the
+saturation point, they made a cycle's right-hand side 17 % slower.
 """
 
 from __future__ import annotations
@@ -298,7 +302,7 @@ def state(tables: PropertyTables, p: float, h: float) -> tuple[float, float, flo
     return state_at(tables, saturation_point(tables, p), p, h)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def state_at(
     tables: PropertyTables, sat: SaturationPoint, p: float, h: float
 ) -> tuple[float, float, float, float, float]:
@@ -332,7 +336,7 @@ def state_values(tables: PropertyTables, p: float, h: float) -> tuple[float, flo
     return state_values_at(tables, saturation_point(tables, p), p, h)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def state_values_at(
     tables: PropertyTables, sat: SaturationPoint, p: float, h: float
 ) -> tuple[float, float, float]:
