@@ -163,8 +163,8 @@ class Diagnosis:
         probabilities: fault name -> P(intensity beyond its threshold).
         verdict: ``no fault``, ``<fault>``, ``several: ...`` or ``<fault> or <fault>: not
             distinguishable with these sensors``.
-        confusions: pairs of faults the data cannot separate, each with the sensor (output
-            id) that would.
+        confusions: pairs of faults the data cannot separate, each with what would (a sensor
+            not logged, or more operating steps when the logged sensors are the best).
         commissioned: the commissioning posterior's mean of each parameter.
     """
 
@@ -230,10 +230,9 @@ class Diagnosis:
                 f"{fault.name:<42} {interval:>32}  {fault.threshold * factor:>7.0f} {unit:<3}"
                 f"{self.probabilities[fault.name]:8.2f}"
             )
-        for first, second, sensor in self.confusions:
+        for first, second, advice in self.confusions:
             lines.append(
-                f"\n{first} and {second} are not distinguishable with these sensors; a {sensor} "
-                "sensor would tell them apart"
+                f"\n{first} and {second} are not distinguishable with these sensors; {advice}"
             )
         return "\n".join(lines)
 
@@ -273,9 +272,10 @@ def separating_sensor(
     logged: Sequence[str],
     accuracy: SensorAccuracy,
 ) -> str:
-    """The output (of every one the cycle has) whose plateau readings differ most, in units of
-    its sensor's accuracy, between the two faults each at its threshold from ``point``, once
-    the second fault's size is matched to the first on the ``logged`` outputs.
+    """The output whose plateau readings differ most, in units of its sensor's accuracy,
+    between the two faults each at its threshold from ``point``, once the second fault's size
+    is matched to the first on the ``logged`` outputs: the best of the cycle's outputs not
+    logged if it differs by one accuracy or more, else the best of all.
 
     Args:
         model: the calibration's simulator (its unit, inputs, window and solver are used).
@@ -317,6 +317,10 @@ def separating_sensor(
     a, b = first[seen].ravel(), second[seen].ravel()
     match = float(a @ b / (b @ b)) if b @ b > 0 else 0.0
     gap = np.abs(first - match * second).max(axis=1)
+    unlogged = [j for j, name in enumerate(outputs) if name not in logged]
+    best_unlogged = max(unlogged, key=lambda j: gap[j], default=None)
+    if best_unlogged is not None and gap[best_unlogged] >= 1.0:
+        return outputs[best_unlogged]
     return outputs[int(np.argmax(gap))]
 
 
@@ -417,12 +421,17 @@ def diagnose(
         solver=solver,
         settle=SETTLE,
     )
-    confusions = [
-        (a, b, separating_sensor(
-            model, point, (by_name[a], by_name[b]), list(model.output_names), accuracy,
-        ))
-        for a, b in pairs
-    ]  # fmt: skip
+    logged = list(model.output_names)
+    confusions = []
+    for a, b in pairs:
+        sensor = separating_sensor(model, point, (by_name[a], by_name[b]), logged, accuracy)
+        advice = (
+            f"they differ most on the logged {sensor}: a log with more operating steps would "
+            "tell them apart"
+            if sensor in logged
+            else f"a {sensor} sensor would tell them apart"
+        )
+        confusions.append((a, b, advice))
     return Diagnosis(tree, intensities, probabilities, text, confusions, commissioned)
 
 
