@@ -360,8 +360,8 @@ def diagnose(
     unit = load_unit() if unit is None else unit
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
-    missing = [pid for f in FAULTS for pid in f.parameters if pid not in unit.parameters.ids]
-    missing = [pid for pid in missing if pid not in unit.faults.ids]
+    needed = {pid for fault in FAULTS for pid in fault.parameters}
+    missing = sorted(needed - set(unit.parameters.ids) - set(unit.faults.ids))
     if missing:
         raise ValueError(
             f"the unit's cycle lacks the fault parameter(s) {missing} the diagnosis needs"
