@@ -161,7 +161,7 @@ class Diagnosis:
             ``fault_<k>``).
         intensities: fault name -> its posterior draws of intensity.
         probabilities: fault name -> P(intensity beyond its threshold).
-        verdict: ``no fault``, ``<fault>``, ``several: ...`` or ``<fault> or <fault>: not
+        verdict: ``no fault``, ``<fault>``, ``several: ...`` or ``<fault> / <fault>: not
             distinguishable with these sensors``.
         confusions: pairs of faults the data cannot separate, each with what would (a sensor
             not logged, or more operating steps when the logged sensors are the best).
@@ -258,7 +258,7 @@ def verdict(probabilities: Mapping[str, float]) -> tuple[str, list[tuple[str, st
     ]
     if pairs:
         a, b = max(pairs, key=lambda pair: probabilities[pair[0]] + probabilities[pair[1]])
-        return f"{a} or {b}: not distinguishable with these sensors", [(a, b)]
+        return f"{a} / {b}: not distinguishable with these sensors", [(a, b)]
     possible = [name for name, p in probabilities.items() if p >= POSSIBLE]
     if possible:
         return "no fault named; possible: " + ", ".join(possible), []

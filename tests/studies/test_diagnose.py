@@ -71,14 +71,14 @@ def test_cases_are_scored_in_yuill_and_brauns_categories():
     assert score(None, "no fault") == "correct"
     assert score(None, "no fault named; possible: undercharge") == "correct"
     assert score(None, gas) == "false alarm"
-    assert score(None, f"{gas} or {fouling}: not distinguishable with these sensors") == (
+    assert score(None, f"{gas} / {fouling}: not distinguishable with these sensors") == (
         "false alarm"
     )
     assert score(gas, gas) == "correct diagnosis"
     assert score(gas, fouling) == "misdiagnosis"
     assert score(gas, f"several: {fouling}, {gas}") == "misdiagnosis"
     assert score(gas, "no fault") == "missed detection"
-    assert score(gas, f"{gas} or {fouling}: not distinguishable with these sensors") == (
+    assert score(gas, f"{gas} / {fouling}: not distinguishable with these sensors") == (
         "no response"
     )
 
