@@ -157,8 +157,8 @@ class Diagnosis:
     """What a later record says of the unit's faults.
 
     Attributes:
-        tree: the posterior DataTree of the later record (intensities in ``posterior`` as
-            ``fault_<k>``).
+        tree: the posterior DataTree of the later record (the parameters, fault parameters
+            included).
         intensities: fault name -> its posterior draws of intensity.
         probabilities: fault name -> P(intensity beyond its threshold).
         verdict: ``no fault``, ``<fault>``, ``several: ...`` or ``<fault> / <fault>: not
