@@ -12,6 +12,7 @@ log q(u(x)) − Σ log((high − low) p (1 − p)).
 
 from __future__ import annotations
 
+import itertools
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -28,6 +29,10 @@ _EDGE = 1e-9  # fraction of the range kept between a sample and its bound in log
 _SAMPLES_PER_FREE_PARAMETER = 10  # samples a mixture needs per free parameter it fits
 _COVARIANCE_FLOOR = 1e-3  # added to covariance diagonals, in units of the logit variance
 _MOMENT_DRAWS = 20000  # draws checking a fitted mixture's marginal moments
+SLAB_SD = 1.7
+"""sd of the logit of a parameter spread over its range in :meth:`GMMPrior.with_slabs`: its
+density in the range stays within 15 % of the uniform's from 2 % to 98 % of it (a logistic's sd,
+the exact uniform, is π/√3 ≈ 1.81, but no normal of that sd is flatter)."""
 
 
 def _with_marginal_moments(
@@ -459,7 +464,64 @@ class GMMPrior(Prior):
             return fitted[faithful[0]][1]
         return _with_marginal_moments(fitted[0][1], matrix, check)
 
-    def _log_unbounded_density(self, unbounded: np.ndarray) -> np.ndarray:
+    def with_slabs(
+        self, groups: Sequence[Sequence[str]], probability: float, *, most: int = 2
+    ) -> tuple[GMMPrior, np.ndarray]:
+        """This mixture as the spike of a spike-and-slab prior: each group of parameters,
+        independently with ``probability``, instead spread over its whole range (a logit
+        normal of sd :data:`SLAB_SD` about the range's middle: near-uniform), at most ``most``
+        groups at once.
+
+        Each component of this mixture is repeated once per set of at most ``most`` groups,
+        those groups' logits replaced by the slab (independent of the rest), with weight
+        ∝ probability^k (1 − probability)^(groups − k) for a set of k groups. Returns the prior
+        and which groups each of its components spreads (components × groups, bool): with
+        :meth:`responsibilities`, the probability that a group left its spike at a point.
+
+        Args:
+            groups: groups of parameter names (each group is moved or kept together).
+            probability: each group's prior probability of being spread, in (0, 1).
+            most: largest number of groups spread at once.
+        """
+        if not 0.0 < probability < 1.0:
+            raise ValueError(f"a slab's probability must lie in (0, 1), got {probability}")
+        unknown = sorted({n for group in groups for n in group} - set(self.names))
+        if unknown:
+            raise ValueError(f"slab group(s) name {unknown}; the prior has {list(self.names)}")
+        index = {name: i for i, name in enumerate(self.names)}
+        weights, means, covariances, spreads = [], [], [], []
+        for k in range(min(most, len(groups)) + 1):
+            chance = probability**k * (1.0 - probability) ** (len(groups) - k)
+            for spread in itertools.combinations(range(len(groups)), k):
+                columns = [index[name] for g in spread for name in groups[g]]
+                mean, covariance = self.means.copy(), self.covariances.copy()
+                mean[:, columns] = 0.0
+                covariance[:, columns, :] = 0.0
+                covariance[:, :, columns] = 0.0
+                covariance[:, columns, columns] = SLAB_SD**2
+                weights.append(chance * self.weights)
+                means.append(mean)
+                covariances.append(covariance)
+                spreads.append(np.tile(np.isin(range(len(groups)), spread), (len(mean), 1)))
+        total = np.concatenate(weights)
+        prior = GMMPrior(
+            self.bounds, total / total.sum(), np.concatenate(means), np.concatenate(covariances)
+        )
+        return prior, np.concatenate(spreads)
+
+    def responsibilities(self, x: np.ndarray) -> np.ndarray:
+        """Each component's probability of having drawn each point: (n, components).
+
+        Args:
+            x: points (n, d) in name order, inside the bounds.
+        """
+        points = self._points(x)
+        fraction = np.clip((points - self.lower) / (self.upper - self.lower), _EDGE, 1 - _EDGE)
+        terms = self._component_log_densities(logit(fraction))
+        return np.exp(terms - logsumexp(terms, axis=1, keepdims=True))
+
+    def _component_log_densities(self, unbounded: np.ndarray) -> np.ndarray:
+        """log(weight × density) of each component at logit points: (n, components)."""
         terms = np.empty((unbounded.shape[0], self.n_components))
         d = self.ndim
         for j in range(self.n_components):
@@ -470,7 +532,10 @@ class GMMPrior(Prior):
                 - 0.5 * (whitened**2).sum(axis=0)
                 - 0.5 * (d * np.log(2 * np.pi) + self._log_det[j])
             )
-        return logsumexp(terms, axis=1)
+        return terms
+
+    def _log_unbounded_density(self, unbounded: np.ndarray) -> np.ndarray:
+        return logsumexp(self._component_log_densities(unbounded), axis=1)
 
     @property
     def is_diagonal(self) -> bool:

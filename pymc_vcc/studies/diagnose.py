@@ -1,14 +1,16 @@
 """Fault diagnosis: which fault, how severe, how sure, from a unit's later log.
 
 A later record is calibrated (:func:`~pymc_vcc.studies.unit_log.calibrate_record`, the same
-error budget) with the commissioning posterior as prior, every parameter a fault moves left
-free (uniform on its bounds) and the cycle's fault parameters (``unit.faults``: a liquid-line
-restriction, non-condensable gas) added. Each fault of :data:`FAULTS` is then an *intensity*
+error budget) under a spike-and-slab prior (:func:`fault_prior`): the unit as commissioned,
+and with a small probability each fault's parameters anywhere in their ranges (the cycle's
+fault parameters, ``unit.faults``: a liquid-line restriction, non-condensable gas, added near
+0). Each fault of :data:`FAULTS` is then an *intensity*
 relative to commissioning, per posterior draw (each paired with a draw of the commissioning
 posterior, so that what commissioning left unknown widens it): a fraction of the commissioned
 value for the faults that move a calibration parameter (the charge, the condenser's air-side
 conductance, the indoor airflow, the compressor's volumetric efficiency), the fault parameter
-itself for the others. Its posterior probability of lying beyond the fault's threshold names it
+itself for the others. The posterior probability that the fault's parameters left the
+commissioned unit (:meth:`FaultPrior.faulted`) with an intensity beyond its threshold names it
 (:data:`NAMED`); two faults that together are likely but neither alone are reported as not
 distinguishable, with the sensor that would tell them apart (:func:`separating_sensor`).
 
@@ -27,9 +29,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 from matplotlib.figure import Figure
+from scipy.special import expit, logit
 
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.error_model import SensorAccuracy, plateau_windows, summarise
+from pymc_vcc.inference.priors import GMMPrior
 from pymc_vcc.physics.cycles.split_unit import air_conductance
 from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import VCCSimulator
@@ -38,8 +42,8 @@ from pymc_vcc.studies.record_budget import CHARGE, held_inputs, plateau_edges
 from pymc_vcc.studies.unit_log import (
     RECORD_BUDGETS,
     SETTLE,
+    box_prior,
     calibrate_record,
-    commissioning_prior,
 )
 
 
@@ -137,8 +141,85 @@ airflow −20 %, volumetric efficiency −10 %, a restriction of 50 kPa at
 the rated flow, 50 kPa of non-condensable gas (about 2 % of the condensing pressure: twice a
 pressure sensor's accuracy)."""
 
-NAMED = 0.9  # a fault is named when P(intensity beyond its threshold) is at least this
+FAULT_PROBABILITY = 0.1
+"""Prior probability that a unit has any one fault (of a group of parameters a fault moves) at
+its later record; at most two at once (:meth:`~pymc_vcc.inference.priors.GMMPrior.with_slabs`).
+A healthy unit is the likelier prior state, so that a fault is named only when the data ask
+for it (a uniform prior put 83 % of its mass on a restriction above its threshold)."""
+HEALTHY_FAULT_FRACTION = 0.005
+"""Where a healthy unit's fault parameters lie, a fraction of their range from 0 (the median of
+a logit normal of sd 1: 95 % below 2 % of the range, far below every threshold)."""
+
+NAMED = 0.9  # a fault is named when its probability is at least this
 POSSIBLE = 0.5  # below NAMED and at least this: reported as possible
+
+
+@dataclass(frozen=True)
+class FaultPrior:
+    """A later record's spike-and-slab prior (:func:`fault_prior`).
+
+    Attributes:
+        prior: the mixture (the spike and each set of at most two faults' slabs).
+        groups: the parameters of each fault (undercharge and overcharge share the charge).
+        spread: which groups each component of ``prior`` spreads (components × groups).
+    """
+
+    prior: GMMPrior
+    groups: tuple[tuple[str, ...], ...]
+    spread: np.ndarray
+
+    def faulted(self, draws: Mapping[str, np.ndarray]) -> dict[tuple[str, ...], np.ndarray]:
+        """Per draw, the probability that each group of parameters left the commissioned
+        unit's spike (its slab's share of the draw under the prior: the label is independent of
+        the data given the parameters).
+
+        Args:
+            draws: parameter -> its posterior draws (the sampled ones: the model's charge).
+        """
+        points = np.column_stack([draws[name] for name in self.prior.names])
+        shares = self.prior.responsibilities(points) @ self.spread
+        return {group: shares[:, g] for g, group in enumerate(self.groups)}
+
+
+def fault_prior(
+    commissioning: xr.DataTree,
+    unit: Unit,
+    drift: float,
+    seed: int,
+    probability: float = FAULT_PROBABILITY,
+) -> FaultPrior:
+    """The prior of a later record to diagnose: the unit as commissioned (each parameter moved
+    by ``drift`` × its range, the charge the model's own, the fault parameters near 0) as the
+    spike, and each fault's parameters, with ``probability``, anywhere in their ranges.
+
+    Args:
+        commissioning: the commissioning posterior.
+        unit: the unit.
+        drift: sd of each parameter's move since commissioning, a fraction of its range.
+        seed: seeds the mixture's fit.
+        probability: each fault's prior probability (:data:`FAULT_PROBABILITY`).
+    """
+    posterior = commissioning["posterior"]
+    names = [str(n) for n in posterior.data_vars if n in unit.parameters.ids]
+    samples = {n: posterior[n].values.ravel() for n in names}
+    samples[CHARGE] = _sampled_charge(posterior)
+    n_draws = len(samples[CHARGE])
+    rng = np.random.default_rng(seed)
+    for name in unit.faults.ids:
+        spec = unit.parameter_spec(name)
+        healthy = expit(logit(HEALTHY_FAULT_FRACTION) + rng.standard_normal(n_draws))
+        samples[name] = spec.low + (spec.high - spec.low) * healthy
+    drifts = {name: (drift if name in names else 0.0) for name in samples}
+    spike = GMMPrior.fit(samples, box_prior(unit, list(samples)), seed=seed, drift=drifts)
+    groups = tuple(dict.fromkeys(fault.parameters for fault in FAULTS))
+    prior, spread = spike.with_slabs(groups, probability)
+    return FaultPrior(prior, groups, spread)
+
+
+def _sampled_charge(posterior: xr.Dataset) -> np.ndarray:
+    """The charge a calibration sampled: the model's own (``M0_model``) when the coils' offset
+    turned it into the unit's."""
+    return posterior.get(f"{CHARGE}_model", posterior[CHARGE]).values.ravel()
 
 
 def _free_parameters(unit: Unit) -> list[str]:
@@ -160,7 +241,8 @@ class Diagnosis:
         tree: the posterior DataTree of the later record (the parameters, fault parameters
             included).
         intensities: fault name -> its posterior draws of intensity.
-        probabilities: fault name -> P(intensity beyond its threshold).
+        probabilities: fault name -> P(the fault's parameters left the commissioned unit,
+            intensity beyond its threshold).
         verdict: ``no fault``, ``<fault>``, ``several: ...`` or ``<fault> / <fault>: not
             distinguishable with these sensors``.
         confusions: pairs of faults the data cannot separate, each with what would (a sensor
@@ -242,7 +324,7 @@ def verdict(probabilities: Mapping[str, float]) -> tuple[str, list[tuple[str, st
     faults neither of which reaches :data:`NAMED` but whose probabilities together do.
 
     Args:
-        probabilities: fault name -> P(intensity beyond its threshold).
+        probabilities: fault name -> its probability (:attr:`Diagnosis.probabilities`).
     """
     named = [name for name, p in probabilities.items() if p >= NAMED]
     if len(named) > 1:
@@ -339,6 +421,7 @@ def diagnose(
     rounds: int = 1,
     method: str = "likelihood",
     accuracy: SensorAccuracy | None = None,
+    fault_probability: float = FAULT_PROBABILITY,
 ) -> Diagnosis:
     """Diagnose a later record of a unit against its commissioning posterior.
 
@@ -356,6 +439,7 @@ def diagnose(
         solver: ODE solver.
         coils, rounds, method: as for :func:`~pymc_vcc.studies.unit_log.calibrate_record`.
         accuracy: the sensors' accuracy.
+        fault_probability: each fault's prior probability (:func:`fault_prior`).
     """
     unit = load_unit() if unit is None else unit
     if budget not in RECORD_BUDGETS:
@@ -377,14 +461,8 @@ def diagnose(
             f"the commissioning posterior lacks {absent}; calibrate the healthy unit with "
             "`pymc-vcc calibrate` (the charge and its nuisance parameters)"
         )
-    prior, _ = commissioning_prior(
-        commissioning,
-        unit,
-        drift,
-        seed,
-        free=[CHARGE, *_free_parameters(unit)],
-        added=unit.faults.ids,
-    )
+    faults = fault_prior(commissioning, unit, drift, seed, fault_probability)
+    prior = faults.prior
     draws, error_draws = RECORD_BUDGETS[budget]
     tree = calibrate_record(
         observed,
@@ -407,7 +485,11 @@ def diagnose(
     picks = np.random.default_rng(seed).integers(0, n_commissioning, len(samples[CHARGE]))
     paired = {pid: posterior[pid].values.ravel()[picks] for pid in commissioned}
     intensities = {f.name: f.intensity(samples, paired, unit) for f in FAULTS}
-    probabilities = {f.name: float(np.mean(intensities[f.name] >= f.threshold)) for f in FAULTS}
+    faulted = faults.faulted({**samples, CHARGE: _sampled_charge(tree["posterior"])})
+    probabilities = {
+        f.name: float(np.mean(faulted[f.parameters] * (intensities[f.name] >= f.threshold)))
+        for f in FAULTS
+    }
     text, pairs = verdict(probabilities)
     by_name = {f.name: f for f in FAULTS}
     point = {name: float(values.mean()) for name, values in samples.items()}

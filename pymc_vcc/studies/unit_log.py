@@ -405,19 +405,11 @@ class RecordResult:
 
 
 def commissioning_prior(
-    posterior: xr.DataTree,
-    unit: Unit,
-    drift: float,
-    seed: int,
-    *,
-    free: Sequence[str] = (CHARGE,),
-    added: Sequence[str] = (),
+    posterior: xr.DataTree, unit: Unit, drift: float, seed: int
 ) -> tuple[Prior, float]:
     """The prior of a later record from a commissioning posterior: its parameters as they were
-    (a Gaussian mixture, each draw moved by ``drift`` × the range), those in ``free`` uniform
-    on their bounds (a leak may have moved the charge anywhere), ``added`` ones (not
-    calibrated at commissioning, e.g. fault parameters) uniform on theirs; and the
-    commissioned charge, kg."""
+    (a Gaussian mixture, each draw moved by ``drift`` × the range), the charge uniform on its
+    bounds (a leak may have moved it anywhere); and the commissioned charge, kg."""
     from pymc_vcc.inference.priors import GMMPrior
 
     names = [str(n) for n in posterior["posterior"].data_vars if n in unit.parameters.ids]
@@ -425,12 +417,9 @@ def commissioning_prior(
         raise ValueError(f"the commissioning posterior has no {CHARGE}; it has {names}")
     samples = {n: posterior["posterior"][n].values.ravel() for n in names}
     commissioned = float(samples[CHARGE].mean())
-    rng = np.random.default_rng(seed)
-    uniform = [*free, *(n for n in added if n not in names)]
-    for name in uniform:
-        spec = unit.parameter_spec(name)
-        samples[name] = rng.uniform(spec.low, spec.high, len(samples[CHARGE]))
-    moved = {name: (0.0 if name in uniform else drift) for name in samples}
+    spec = unit.parameter_spec(CHARGE)
+    samples[CHARGE] = np.random.default_rng(seed).uniform(spec.low, spec.high, len(samples[CHARGE]))
+    moved = {name: (0.0 if name == CHARGE else drift) for name in samples}
     prior = GMMPrior.fit(samples, box_prior(unit, list(samples)), seed=seed, drift=moved)
     return prior, commissioned
 
