@@ -100,6 +100,7 @@ def _diagnose(args: argparse.Namespace) -> int:
         coils=args.coils,
         rounds=args.rounds,
         method=args.method,
+        fault_probability=args.fault_probability,
     )
     n_simulations = int(result.tree["sample_stats"]["n_simulations"])
     return _report(
@@ -650,6 +651,15 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="COMMISSIONING",
         required=True,
         help="the folder (or posterior.nc) written by `pymc-vcc calibrate` at commissioning",
+    )
+    from pymc_vcc.studies.diagnose import FAULT_PROBABILITY
+
+    diagnose.add_argument(
+        "--fault-probability",
+        type=float,
+        default=FAULT_PROBABILITY,
+        help="each fault's prior probability since commissioning, in (0, 1) (default "
+        f"{FAULT_PROBABILITY})",
     )
     _add_study_options(diagnose, "results/diagnose", "small")
     _add_record_options(diagnose)

@@ -181,6 +181,12 @@ class FaultPrior:
         return {group: shares[:, g] for g, group in enumerate(self.groups)}
 
 
+def check_fault_probability(probability: float) -> None:
+    """Refuse a fault probability outside (0, 1), in one line."""
+    if not 0.0 < probability < 1.0:
+        raise ValueError(f"fault probability must lie in (0, 1), got {probability}")
+
+
 def fault_prior(
     commissioning: xr.DataTree,
     unit: Unit,
@@ -528,6 +534,7 @@ def diagnose_study(
     coils: str = "finer",
     rounds: int = 1,
     method: str = "likelihood",
+    fault_probability: float = FAULT_PROBABILITY,
 ) -> Diagnosis:
     """``pymc-vcc diagnose LOG --prior COMMISSIONING``: load and check the log and the
     commissioning posterior before any simulation, diagnose, and write the posterior, the
@@ -539,7 +546,7 @@ def diagnose_study(
         commissioning: the folder (or ``posterior.nc``) of the healthy unit's calibration.
         column_map: the log's column map (default: ``LOG.columns.toml`` beside it).
         unit: the unit description (default: the built-in split unit).
-        drift, coils, rounds, method: as for :func:`diagnose`.
+        drift, coils, rounds, method, fault_probability: as for :func:`diagnose`.
     """
     from pymc_vcc.io.measurements import load_log
     from pymc_vcc.physics.simulate import OUTPUT_INTERVAL
@@ -553,6 +560,7 @@ def diagnose_study(
     )
 
     check_drift(drift)
+    check_fault_probability(fault_probability)
     budget = record_budget_name(settings)
     unit = unit or load_unit()
     measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
@@ -571,6 +579,7 @@ def diagnose_study(
             coils=coils,
             rounds=rounds,
             method=method,
+            fault_probability=fault_probability,
         )
         if settings.out is not None:
             write_netcdf(result.tree, settings.out / POSTERIOR_FILE)

@@ -72,3 +72,12 @@ def test_a_bad_log_is_refused_in_one_line_before_any_simulation(tmp_path, capsys
     assert main(["leak", log_path, "--method", "smc", "--out", str(tmp_path / "d")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "a LOG takes likelihood or rejection" in err
+    for option, value, message in [
+        ("--fault-probability", "1.5", "fault probability must lie in (0, 1), got 1.5"),
+        ("--drift", "2", "drift must lie in [0, 1] (a fraction of each range), got 2.0"),
+    ]:
+        argv = ["diagnose", log_path, "--prior", str(tmp_path), option, value]
+        assert main([*argv, "--out", str(tmp_path / "e")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and message in err
+        assert not (tmp_path / "e").exists()
