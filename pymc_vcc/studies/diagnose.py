@@ -53,8 +53,9 @@ class Fault:
 
     Attributes:
         name: what a service engineer calls it.
-        parameters: the parameters it moves (left free of the commissioning posterior; its
-            intensity is the largest of their moves, unless it has a :attr:`measure`).
+        parameters: the parameters it moves (spread together by its slab in
+            :func:`fault_prior`; its intensity is the largest of their moves, unless it has a
+            :attr:`measure`).
         direction: −1 if the fault lowers them, +1 if it raises them.
         threshold: the smallest intensity that counts as the fault.
         relative: intensity as a fraction of the commissioned value (else in the parameter's
@@ -228,8 +229,8 @@ def _sampled_charge(posterior: xr.Dataset) -> np.ndarray:
     return posterior.get(f"{CHARGE}_model", posterior[CHARGE]).values.ravel()
 
 
-def _free_parameters(unit: Unit) -> list[str]:
-    """The calibration parameters a fault moves (left free of the commissioning posterior)."""
+def _moved_parameters(unit: Unit) -> list[str]:
+    """The calibration parameters a fault moves (the commissioning posterior must hold them)."""
     return [
         pid
         for fault in FAULTS
@@ -461,7 +462,7 @@ def diagnose(
     commissioned = {
         str(n): float(posterior[n].mean()) for n in posterior.data_vars if n in unit.parameters.ids
     }
-    absent = [pid for pid in (CHARGE, *_free_parameters(unit)) if pid not in commissioned]
+    absent = [pid for pid in (CHARGE, *_moved_parameters(unit)) if pid not in commissioned]
     if absent:
         raise ValueError(
             f"the commissioning posterior lacks {absent}; calibrate the healthy unit with "
