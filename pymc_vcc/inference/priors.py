@@ -375,17 +375,18 @@ class GMMPrior(Prior):
         seed: int | None = None,
         moment_tolerance: float = 0.05,
         drift: float | Mapping[str, float] = 0.0,
+        covariance: str | None = None,
     ) -> GMMPrior:
         """Fit a mixture to samples: the best by BIC of those that keep the marginal moments.
 
-        Components get full covariances when there are at least 10 samples per free
-        parameter of one, diagonal ones otherwise, and at most one component per 10 × its free
-        parameters (so 3 samples in 2-D give one diagonal Gaussian as wide as the samples,
-        not a 1e-6-wide spike). Covariances are floored at 1e-3 of each parameter's logit
+        Components get full covariances when there are at least 10 samples per free parameter of
+        one, diagonal ones otherwise (unless ``covariance`` says which), and at most one component
+        per 10 × its free parameters (so 3 samples in 2-D give one diagonal Gaussian as wide as the
+        samples, not a 1e-6-wide spike). Covariances are floored at 1e-3 of each parameter's logit
         variance. Among the fits, in order of BIC, the first whose marginal means and standard
         deviations (physical units, from 20000 draws) are within ``moment_tolerance`` sample
-        standard deviations of the samples' is chosen; if none is, the best by BIC with each
-        logit coordinate mapped affinely so that the marginal means and sds match.
+        standard deviations of the samples' is chosen; if none is, the best by BIC with each logit
+        coordinate mapped affinely so that the marginal means and sds match.
 
         Args:
             samples: an array (n, d) in the order of ``bounds``, a mapping name -> values, a
@@ -399,6 +400,8 @@ class GMMPrior(Prior):
                 is of a drifted or another unit): the sd of a normal step, in fractions of each
                 range (one for all, or name -> fraction, others 0). Each sample is moved by such
                 a step, clipped to the bounds, before the fit.
+            covariance: ``"full"`` or ``"diag"`` whatever the number of samples (e.g. full
+                for one component whose correlations matter), None to choose by it.
         """
         from sklearn.mixture import GaussianMixture  # heavy import, needed only here
 
@@ -433,9 +436,10 @@ class GMMPrior(Prior):
         spread[spread <= 0] = 1.0
         standard = (unbounded - centre) / spread
         n, d = matrix.shape
-        covariance_type = (
-            "full" if n >= _SAMPLES_PER_FREE_PARAMETER * (d + d * (d + 1) // 2) else "diag"
-        )
+        if covariance not in (None, "full", "diag"):
+            raise ValueError(f"covariance must be 'full', 'diag' or None, got {covariance!r}")
+        enough = n >= _SAMPLES_PER_FREE_PARAMETER * (d + d * (d + 1) // 2)
+        covariance_type = covariance or ("full" if enough else "diag")
         per_component = d + (d * (d + 1) // 2 if covariance_type == "full" else d) + 1
         largest = max(
             1, min(int(max_components), n // (_SAMPLES_PER_FREE_PARAMETER * per_component))

@@ -199,6 +199,11 @@ def fault_prior(
     by ``drift`` × its range, the charge the model's own, the fault parameters near 0) as the
     spike, and each fault's parameters, with ``probability``, anywhere in their ranges.
 
+    The spike is one Gaussian with a full covariance (in the bounds' logit space): the
+    commissioning data pin combinations of parameters (the condenser's conductance, not its
+    HTC and airflow apart), and a fault is a move off such a ridge, which a diagonal spike, as
+    wide as each parameter alone, would not see.
+
     Args:
         commissioning: the commissioning posterior.
         unit: the unit.
@@ -217,7 +222,14 @@ def fault_prior(
         healthy = expit(logit(HEALTHY_FAULT_FRACTION) + rng.standard_normal(n_draws))
         samples[name] = spec.low + (spec.high - spec.low) * healthy
     drifts = {name: (drift if name in names else 0.0) for name in samples}
-    spike = GMMPrior.fit(samples, box_prior(unit, list(samples)), seed=seed, drift=drifts)
+    spike = GMMPrior.fit(
+        samples,
+        box_prior(unit, list(samples)),
+        max_components=1,
+        seed=seed,
+        drift=drifts,
+        covariance="full",
+    )
     groups = tuple(dict.fromkeys(fault.parameters for fault in FAULTS))
     prior, spread = spike.with_slabs(groups, probability)
     return FaultPrior(prior, groups, spread)

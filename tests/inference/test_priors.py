@@ -296,3 +296,19 @@ def test_slabs_spread_each_group_with_its_probability_and_tell_which_left_the_sp
         spike.with_slabs([("D",)], 0.1)
     with pytest.raises(ValueError, match=r"probability must lie in \(0, 1\), got 1.5"):
         spike.with_slabs([("A",)], 1.5)
+
+
+def test_a_full_covariance_can_be_asked_for_when_the_samples_are_few():
+    """40 samples on a ridge in 3-D: by sample count the fit is diagonal and loses the ridge;
+    asked for a full covariance, its draws keep the samples' correlation."""
+    bounds = {"A": (0.0, 1.0), "B": (0.0, 1.0), "C": (0.0, 1.0)}
+    rng = np.random.default_rng(5)
+    a = 0.5 + 0.1 * rng.standard_normal(40)
+    samples = np.column_stack([a, 1.0 - a + 0.005 * rng.standard_normal(40), np.full(40, 0.5)])
+    samples[:, 2] += 0.05 * rng.standard_normal(40)
+    for covariance, correlation in [(None, 0.0), ("full", -0.95)]:
+        prior = GMMPrior.fit(samples, bounds, max_components=1, seed=1, covariance=covariance)
+        draws = prior.sample(20_000, rng)
+        assert np.corrcoef(draws[:, 0], draws[:, 1])[0, 1] == pytest.approx(correlation, abs=0.05)
+    with pytest.raises(ValueError, match="covariance must be 'full', 'diag' or None, got 'tied'"):
+        GMMPrior.fit(samples, bounds, covariance="tied")
