@@ -470,7 +470,7 @@ class GMMPrior(Prior):
 
     def with_slabs(
         self, groups: Sequence[Sequence[str]], probability: float, *, most: int = 2
-    ) -> tuple[GMMPrior, np.ndarray]:
+    ) -> GMMPrior:
         """This mixture as the spike of a spike-and-slab prior: each group of parameters,
         independently with ``probability``, instead spread over its whole range (a logit
         normal of sd :data:`SLAB_SD` about the range's middle: near-uniform), at most ``most``
@@ -478,9 +478,7 @@ class GMMPrior(Prior):
 
         Each component of this mixture is repeated once per set of at most ``most`` groups,
         those groups' logits replaced by the slab (independent of the rest), with weight
-        ∝ probability^k (1 − probability)^(groups − k) for a set of k groups. Returns the prior
-        and which groups each of its components spreads (components × groups, bool): with
-        :meth:`responsibilities`, the probability that a group left its spike at a point.
+        ∝ probability^k (1 − probability)^(groups − k) for a set of k groups.
 
         Args:
             groups: groups of parameter names (each group is moved or kept together).
@@ -493,11 +491,11 @@ class GMMPrior(Prior):
         if unknown:
             raise ValueError(f"slab group(s) name {unknown}; the prior has {list(self.names)}")
         index = {name: i for i, name in enumerate(self.names)}
-        weights, means, covariances, spreads = [], [], [], []
+        weights, means, covariances = [], [], []
         for k in range(min(most, len(groups)) + 1):
             chance = probability**k * (1.0 - probability) ** (len(groups) - k)
-            for spread in itertools.combinations(range(len(groups)), k):
-                columns = [index[name] for g in spread for name in groups[g]]
+            for spread in itertools.combinations(groups, k):
+                columns = [index[name] for group in spread for name in group]
                 mean, covariance = self.means.copy(), self.covariances.copy()
                 mean[:, columns] = 0.0
                 covariance[:, columns, :] = 0.0
@@ -506,26 +504,12 @@ class GMMPrior(Prior):
                 weights.append(chance * self.weights)
                 means.append(mean)
                 covariances.append(covariance)
-                spreads.append(np.tile(np.isin(range(len(groups)), spread), (len(mean), 1)))
         total = np.concatenate(weights)
-        prior = GMMPrior(
+        return GMMPrior(
             self.bounds, total / total.sum(), np.concatenate(means), np.concatenate(covariances)
         )
-        return prior, np.concatenate(spreads)
 
-    def responsibilities(self, x: np.ndarray) -> np.ndarray:
-        """Each component's probability of having drawn each point: (n, components).
-
-        Args:
-            x: points (n, d) in name order, inside the bounds.
-        """
-        points = self._points(x)
-        fraction = np.clip((points - self.lower) / (self.upper - self.lower), _EDGE, 1 - _EDGE)
-        terms = self._component_log_densities(logit(fraction))
-        return np.exp(terms - logsumexp(terms, axis=1, keepdims=True))
-
-    def _component_log_densities(self, unbounded: np.ndarray) -> np.ndarray:
-        """log(weight × density) of each component at logit points: (n, components)."""
+    def _log_unbounded_density(self, unbounded: np.ndarray) -> np.ndarray:
         terms = np.empty((unbounded.shape[0], self.n_components))
         d = self.ndim
         for j in range(self.n_components):
@@ -536,10 +520,7 @@ class GMMPrior(Prior):
                 - 0.5 * (whitened**2).sum(axis=0)
                 - 0.5 * (d * np.log(2 * np.pi) + self._log_det[j])
             )
-        return terms
-
-    def _log_unbounded_density(self, unbounded: np.ndarray) -> np.ndarray:
-        return logsumexp(self._component_log_densities(unbounded), axis=1)
+        return logsumexp(terms, axis=1)
 
     @property
     def is_diagonal(self) -> bool:

@@ -9,8 +9,7 @@ relative to commissioning, per posterior draw (each paired with a draw of the co
 posterior, so that what commissioning left unknown widens it): a fraction of the commissioned
 value for the faults that move a calibration parameter (the charge, the condenser's air-side
 conductance, the indoor airflow, the compressor's volumetric efficiency), the fault parameter
-itself for the others. The posterior probability that the fault's parameters left the
-commissioned unit (:meth:`FaultPrior.faulted`) with an intensity beyond its threshold names it
+itself for the others. Its posterior probability of lying beyond the fault's threshold names it
 (:data:`NAMED`); two faults that together are likely but neither alone are reported as not
 distinguishable, with the sensor that would tell them apart (:func:`separating_sensor`).
 
@@ -151,35 +150,8 @@ HEALTHY_FAULT_FRACTION = 0.005
 """Where a healthy unit's fault parameters lie, a fraction of their range from 0 (the median of
 a logit normal of sd 1: 95 % below 2 % of the range, far below every threshold)."""
 
-NAMED = 0.9  # a fault is named when its probability is at least this
+NAMED = 0.9  # a fault is named when P(intensity beyond its threshold) is at least this
 POSSIBLE = 0.5  # below NAMED and at least this: reported as possible
-
-
-@dataclass(frozen=True)
-class FaultPrior:
-    """A later record's spike-and-slab prior (:func:`fault_prior`).
-
-    Attributes:
-        prior: the mixture (the spike and each set of at most two faults' slabs).
-        groups: the parameters of each fault (undercharge and overcharge share the charge).
-        spread: which groups each component of ``prior`` spreads (components × groups).
-    """
-
-    prior: GMMPrior
-    groups: tuple[tuple[str, ...], ...]
-    spread: np.ndarray
-
-    def faulted(self, draws: Mapping[str, np.ndarray]) -> dict[tuple[str, ...], np.ndarray]:
-        """Per draw, the probability that each group of parameters left the commissioned
-        unit's spike (its slab's share of the draw under the prior: the label is independent of
-        the data given the parameters).
-
-        Args:
-            draws: parameter -> its posterior draws (the sampled ones: the model's charge).
-        """
-        points = np.column_stack([draws[name] for name in self.prior.names])
-        shares = self.prior.responsibilities(points) @ self.spread
-        return {group: shares[:, g] for g, group in enumerate(self.groups)}
 
 
 def check_fault_probability(probability: float) -> None:
@@ -194,7 +166,7 @@ def fault_prior(
     drift: float,
     seed: int,
     probability: float = FAULT_PROBABILITY,
-) -> FaultPrior:
+) -> GMMPrior:
     """The prior of a later record to diagnose: the unit as commissioned (each parameter moved
     by ``drift`` × its range, the charge the model's own, the fault parameters near 0) as the
     spike, and each fault's parameters, with ``probability``, anywhere in their ranges.
@@ -214,7 +186,7 @@ def fault_prior(
     posterior = commissioning["posterior"]
     names = [str(n) for n in posterior.data_vars if n in unit.parameters.ids]
     samples = {n: posterior[n].values.ravel() for n in names}
-    samples[CHARGE] = _sampled_charge(posterior)
+    samples[CHARGE] = posterior.get(f"{CHARGE}_model", posterior[CHARGE]).values.ravel()
     n_draws = len(samples[CHARGE])
     rng = np.random.default_rng(seed)
     for name in unit.faults.ids:
@@ -230,15 +202,7 @@ def fault_prior(
         drift=drifts,
         covariance="full",
     )
-    groups = tuple(dict.fromkeys(fault.parameters for fault in FAULTS))
-    prior, spread = spike.with_slabs(groups, probability)
-    return FaultPrior(prior, groups, spread)
-
-
-def _sampled_charge(posterior: xr.Dataset) -> np.ndarray:
-    """The charge a calibration sampled: the model's own (``M0_model``) when the coils' offset
-    turned it into the unit's."""
-    return posterior.get(f"{CHARGE}_model", posterior[CHARGE]).values.ravel()
+    return spike.with_slabs(list(dict.fromkeys(fault.parameters for fault in FAULTS)), probability)
 
 
 def _moved_parameters(unit: Unit) -> list[str]:
@@ -260,8 +224,7 @@ class Diagnosis:
         tree: the posterior DataTree of the later record (the parameters, fault parameters
             included).
         intensities: fault name -> its posterior draws of intensity.
-        probabilities: fault name -> P(the fault's parameters left the commissioned unit,
-            intensity beyond its threshold).
+        probabilities: fault name -> P(intensity beyond its threshold).
         verdict: ``no fault``, ``<fault>``, ``several: ...`` or ``<fault> / <fault>: not
             distinguishable with these sensors``.
         confusions: pairs of faults the data cannot separate, each with what would (a sensor
@@ -343,7 +306,7 @@ def verdict(probabilities: Mapping[str, float]) -> tuple[str, list[tuple[str, st
     faults neither of which reaches :data:`NAMED` but whose probabilities together do.
 
     Args:
-        probabilities: fault name -> its probability (:attr:`Diagnosis.probabilities`).
+        probabilities: fault name -> P(intensity beyond its threshold).
     """
     named = [name for name, p in probabilities.items() if p >= NAMED]
     if len(named) > 1:
@@ -480,8 +443,7 @@ def diagnose(
             f"the commissioning posterior lacks {absent}; calibrate the healthy unit with "
             "`pymc-vcc calibrate` (the charge and its nuisance parameters)"
         )
-    faults = fault_prior(commissioning, unit, drift, seed, fault_probability)
-    prior = faults.prior
+    prior = fault_prior(commissioning, unit, drift, seed, fault_probability)
     draws, error_draws = RECORD_BUDGETS[budget]
     tree = calibrate_record(
         observed,
@@ -504,11 +466,7 @@ def diagnose(
     picks = np.random.default_rng(seed).integers(0, n_commissioning, len(samples[CHARGE]))
     paired = {pid: posterior[pid].values.ravel()[picks] for pid in commissioned}
     intensities = {f.name: f.intensity(samples, paired, unit) for f in FAULTS}
-    faulted = faults.faulted({**samples, CHARGE: _sampled_charge(tree["posterior"])})
-    probabilities = {
-        f.name: float(np.mean(faulted[f.parameters] * (intensities[f.name] >= f.threshold)))
-        for f in FAULTS
-    }
+    probabilities = {f.name: float(np.mean(intensities[f.name] >= f.threshold)) for f in FAULTS}
     text, pairs = verdict(probabilities)
     by_name = {f.name: f for f in FAULTS}
     point = {name: float(values.mean()) for name, values in samples.items()}

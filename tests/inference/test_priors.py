@@ -266,21 +266,18 @@ def test_a_drift_widens_the_fitted_prior_by_the_step_the_parameters_may_take():
         GMMPrior.fit(samples, BOUNDS, drift=-0.1)
 
 
-def test_slabs_spread_each_group_with_its_probability_and_tell_which_left_the_spike():
+def test_slabs_spread_each_group_with_its_probability_at_most_two_at_once():
     """A narrow spike with a slab for each of three one-parameter groups, at most two at once:
     each group is spread in its probability's share of draws (renormalised over the sets kept),
-    a spread group is near-uniform over its range, and a coordinate far from the spike is
-    credited to its group's slab while those at the spike are not."""
+    never all three, and a spread group is near-uniform over its range."""
     bounds = {"A": (0.0, 1.0), "B": (0.0, 1.0), "C": (0.0, 1.0)}
     rng = np.random.default_rng(4)
-    samples = 0.5 + 0.01 * rng.standard_normal((300, 3))
-    spike = GMMPrior.fit(samples, bounds, seed=1)
-    prior, spread = spike.with_slabs([("A",), ("B",), ("C",)], 0.2)
+    spike = GMMPrior.fit(0.5 + 0.01 * rng.standard_normal((300, 3)), bounds, seed=1)
+    prior = spike.with_slabs([("A",), ("B",), ("C",)], 0.2)
     p = 0.2
     kept = (1 - p) ** 3 + 3 * p * (1 - p) ** 2 + 3 * p**2 * (1 - p)
     share = (p * (1 - p) ** 2 + 2 * p**2 * (1 - p)) / kept
-    assert spread.shape == (prior.n_components, 3)
-    assert prior.weights @ spread == pytest.approx([share] * 3)
+    assert prior.n_components == 7 * spike.n_components
     draws = prior.sample(200_000, rng)
     away = np.abs(draws - 0.5) > 0.1
     outside_spike = np.mean(np.abs(rng.uniform(size=200_000) - 0.5) > 0.1)
@@ -289,9 +286,6 @@ def test_slabs_spread_each_group_with_its_probability_and_tell_which_left_the_sp
     edges = [0.02, 0.14, 0.26, 0.38, 0.62, 0.74, 0.86, 0.98]
     histogram = np.delete(np.histogram(draws[away[:, 0], 0], bins=edges)[0], 3)
     assert histogram.max() / histogram.min() < 1.35  # near-uniform where spread
-    shares = prior.responsibilities(np.array([[0.9, 0.5, 0.5], [0.5, 0.5, 0.5]])) @ spread
-    assert shares[0, 0] == pytest.approx(1.0, abs=1e-6)
-    assert (shares[0, 1:] < 0.01).all() and (shares[1] < 0.01).all()
     with pytest.raises(ValueError, match=r"slab group\(s\) name \['D'\]"):
         spike.with_slabs([("D",)], 0.1)
     with pytest.raises(ValueError, match=r"probability must lie in \(0, 1\), got 1.5"):
