@@ -1,17 +1,17 @@
 """Fault diagnosis: which fault, how severe, how sure, from a unit's later log.
 
 A later record is calibrated (:func:`~pymc_vcc.studies.unit_log.calibrate_record`, the same
-error budget) under a spike-and-slab prior (:func:`fault_prior`): the unit as commissioned,
-and with a small probability each fault's parameters anywhere in their ranges (the cycle's
-fault parameters, ``unit.faults``: a liquid-line restriction, non-condensable gas, added near
-0). Each fault of :data:`FAULTS` is then an *intensity*
-relative to commissioning, per posterior draw (each paired with a draw of the commissioning
-posterior, so that what commissioning left unknown widens it): a fraction of the commissioned
-value for the faults that move a calibration parameter (the charge, the condenser's air-side
-conductance, the indoor airflow, the compressor's volumetric efficiency), the fault parameter
-itself for the others. Its posterior probability of lying beyond the fault's threshold names it
-(:data:`NAMED`); two faults that together are likely but neither alone are reported as not
-distinguishable, with the sensor that would tell them apart (:func:`separating_sensor`).
+error budget) under a spike-and-slab prior (:func:`fault_prior`): the unit as commissioned, and
+with a small probability each fault's parameters anywhere in their ranges (the cycle's fault
+parameters, ``unit.faults``: a liquid-line restriction, non-condensable gas, added near 0). Each
+fault of :data:`FAULTS` is then an *intensity* relative to commissioning, per posterior draw
+(each paired with a draw of the commissioning posterior, so that what commissioning left unknown
+widens it): a fraction of the commissioned value for the faults that move a calibration
+parameter (the charge, the condenser's air-side conductance, the indoor airflow, the
+compressor's volumetric efficiency), the fault parameter itself for the others. Its posterior
+probability of lying beyond the fault's threshold names it (:data:`NAMED`); two faults that
+together are likely but neither alone are reported as not distinguishable, with the sensor that
+would tell them apart (:func:`separating_sensor`).
 
 The faults are the standard set of the fault-detection literature (Yuill and Braun's
 evaluation of FDD protocols; ASHRAE RP-1043): undercharge, overcharge, condenser fouling or low
@@ -173,8 +173,8 @@ def fault_prior(
 
     The spike is one Gaussian with a full covariance (in the bounds' logit space): the
     commissioning data pin combinations of parameters (the condenser's conductance, not its
-    HTC and airflow apart), and a fault is a move off such a ridge, which a diagonal spike, as
-    wide as each parameter alone, would not see.
+    HTC and airflow apart), which a diagonal spike, as wide as each parameter alone, would let
+    a later record move freely.
 
     Args:
         commissioning: the commissioning posterior.
