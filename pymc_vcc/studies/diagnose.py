@@ -423,6 +423,7 @@ def diagnose(
         accuracy: the sensors' accuracy.
         fault_probability: each fault's prior probability (:func:`fault_prior`).
     """
+    check_fault_probability(fault_probability)
     unit = load_unit() if unit is None else unit
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")

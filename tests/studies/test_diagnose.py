@@ -177,3 +177,10 @@ def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
         if fault == "undercharge":
             assert moved["M0"] == pytest.approx(1.5 * (1 + changes["M0"]))
             assert intensity == pytest.approx(-changes["M0"])
+
+
+def test_a_fault_probability_outside_zero_one_is_refused_before_any_work():
+    from pymc_vcc.studies.diagnose import diagnose
+
+    with pytest.raises(ValueError, match=r"fault probability must lie in \(0, 1\), got 0.0"):
+        diagnose(None, None, None, None, fault_probability=0.0)  # type: ignore[arg-type]
