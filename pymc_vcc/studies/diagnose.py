@@ -39,6 +39,7 @@ from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.record_budget import CHARGE, held_inputs, plateau_edges
 from pymc_vcc.studies.unit_log import (
+    MODEL_CHARGE,
     RECORD_BUDGETS,
     SETTLE,
     box_prior,
@@ -186,7 +187,7 @@ def fault_prior(
     posterior = commissioning["posterior"]
     names = [str(n) for n in posterior.data_vars if n in unit.parameters.ids]
     samples = {n: posterior[n].values.ravel() for n in names}
-    samples[CHARGE] = posterior.get(f"{CHARGE}_model", posterior[CHARGE]).values.ravel()
+    samples[CHARGE] = posterior.get(MODEL_CHARGE, posterior[CHARGE]).values.ravel()
     n_draws = len(samples[CHARGE])
     rng = np.random.default_rng(seed)
     for name in unit.faults.ids:
@@ -471,7 +472,7 @@ def diagnose(
     text, pairs = verdict(probabilities)
     by_name = {f.name: f for f in FAULTS}
     point = {name: float(values.mean()) for name, values in samples.items()}
-    point[CHARGE] = point.get(f"{CHARGE}_model", point[CHARGE])  # the model's own charge
+    point[CHARGE] = point.get(MODEL_CHARGE, point[CHARGE])
     point = {k: v for k, v in point.items() if k in prior.names}
     model = VCCSimulator(
         unit,

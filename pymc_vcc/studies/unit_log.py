@@ -72,6 +72,7 @@ NUISANCE: tuple[str, ...] = (
 airflow, valve and compressor wear) or what was never known exactly."""
 
 SETTLE = 600.0  # s at the record's first inputs before it starts
+MODEL_CHARGE = f"{CHARGE}_model"  # the sampled (model's) charge, beside the unit's
 SCOUTING_SHARE = 0.5  # particles and model-error draws of a round before the last
 MIN_PARTICLES = 16  # fewest SMC particles of a round
 MIN_ERROR_DRAWS = 12  # fewest model-error draws of a round (the covariance needs 10)
@@ -299,7 +300,7 @@ def _to_unit_charge(tree: xr.DataTree, offset: CoilOffset, rng: np.random.Genera
     posterior = tree["posterior"].to_dataset()
     model_charge = posterior[CHARGE]
     unit_charge = offset.unit_charge(model_charge.values, rng)
-    posterior[f"{CHARGE}_model"] = model_charge
+    posterior[MODEL_CHARGE] = model_charge
     posterior[CHARGE] = model_charge.copy(data=unit_charge)
     tree["posterior"] = xr.DataTree(posterior)
 
