@@ -3,15 +3,15 @@
 A later record is calibrated (:func:`~pymc_vcc.studies.unit_log.calibrate_record`, the same
 error budget) under a spike-and-slab prior (:func:`fault_prior`): the unit as commissioned, and
 with a small probability each fault's parameters anywhere in their ranges (the cycle's fault
-parameters, ``unit.faults``: a liquid-line restriction, non-condensable gas, added near 0). Each
-fault of :data:`FAULTS` is then an *intensity* relative to commissioning, per posterior draw
-(each paired with a draw of the commissioning posterior, so that what commissioning left unknown
-widens it): a fraction of the commissioned value for the faults that move a calibration
-parameter (the charge, the condenser's air-side conductance, the indoor airflow, the
-compressor's volumetric efficiency), the fault parameter itself for the others. Its posterior
-probability of lying beyond the fault's threshold names it (:data:`NAMED`); two faults that
-together are likely but neither alone are reported as not distinguishable, with the sensor that
-would tell them apart (:func:`separating_sensor`).
+parameters, ``unit.faults``: a liquid-line restriction, non-condensable gas, leaking compressor
+valves, added near 0). Each fault of :data:`FAULTS` is then an *intensity* relative to
+commissioning, per posterior draw (each paired with a draw of the commissioning posterior, so
+that what commissioning left unknown widens it): a fraction of the commissioned value for the
+faults that move a calibration parameter (the charge, the condenser's air-side conductance, the
+indoor airflow), the fault parameter itself for the others (a restriction, the air, the
+compressor's valve leakage). Its posterior probability of lying beyond the fault's threshold
+names it (:data:`NAMED`); two faults that together are likely but neither alone are reported as
+not distinguishable, with the sensor that would tell them apart (:func:`separating_sensor`).
 
 The faults are the standard set of the fault-detection literature (Yuill and Braun's
 evaluation of FDD protocols; ASHRAE RP-1043): undercharge, overcharge, condenser fouling or low
@@ -132,15 +132,16 @@ FAULTS: tuple[Fault, ...] = (
         measure=condenser_conductance,
     ),
     Fault("low indoor airflow", ("FI_FLOW",), -1, 0.20),
-    Fault("compressor valve leakage", ("CF_VOL",), -1, 0.10),
+    Fault("compressor valve leakage", ("F_LEAK",), +1, 0.10, False),
     Fault("liquid-line restriction", ("DP_RESTR",), +1, 50e3, False, ("kPa", 1e-3)),
     Fault("non-condensable gas", ("P_NCG",), +1, 50e3, False, ("kPa", 1e-3)),
 )
 """The standard faults and their detection thresholds: charge ±10 % (the field's tolerance),
 the condenser's air-side conductance (fouling and outdoor airflow lower it alike) or the indoor
-airflow −20 %, volumetric efficiency −10 %, a restriction of 50 kPa at
-the rated flow, 50 kPa of non-condensable gas (about 2 % of the condensing pressure: twice a
-pressure sensor's accuracy)."""
+airflow −20 %, 10 % of the compressor's displaced gas leaking back (at the rating point: the
+capacity −5 %, the evaporating pressure +30 kPa), a restriction of 50 kPa at the rated flow,
+50 kPa of non-condensable gas (about 2 % of the condensing pressure: twice a pressure sensor's
+accuracy)."""
 
 FAULT_PROBABILITY = 0.1
 """Prior probability that a unit has any one fault (of a group of parameters a fault moves) at

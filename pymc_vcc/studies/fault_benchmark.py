@@ -50,7 +50,7 @@ CASES: tuple[Case, ...] = (
     ("condenser fouling or low outdoor airflow", {"HTC_CA": -0.60}),
     ("condenser fouling or low outdoor airflow", {"FO_FLOW": -0.30}),
     ("low indoor airflow", {"FI_FLOW": -0.40}),
-    ("compressor valve leakage", {"CF_VOL": -0.25}),
+    ("compressor valve leakage", {"F_LEAK": 0.25}),
     ("liquid-line restriction", {"DP_RESTR": 150e3}),
     ("non-condensable gas", {"P_NCG": 120e3}),
 )

@@ -175,6 +175,7 @@ def _compressor(**changes):
         "cf_pow": 1.0,
         "cf_pref": 1.0,
         "cf_shell": 1.0,
+        "valve_leakage": 0.0,
         "T_discharge_max": 430.0,
         "p_protection_start": 41e5,
         "p_protection_stop": 46e5,
@@ -182,11 +183,16 @@ def _compressor(**changes):
     return make_record(COMPRESSOR_RECORD, values | changes)
 
 
-def _compress(tables, cf_vol, cf_pow, cf_pref, cf_shell, t_max=430.0):
+def _compress(tables, cf_vol, cf_pow, cf_pref, cf_shell, t_max=430.0, leakage=0.0):
     p_s, p_d, h_s = 9.5e5, 27.5e5, 4.30e5
     rho_s = state(tables, p_s, h_s)[1]
     params = _compressor(
-        cf_vol=cf_vol, cf_pow=cf_pow, cf_pref=cf_pref, cf_shell=cf_shell, T_discharge_max=t_max
+        cf_vol=cf_vol,
+        cf_pow=cf_pow,
+        cf_pref=cf_pref,
+        cf_shell=cf_shell,
+        T_discharge_max=t_max,
+        valve_leakage=leakage,
     )
     suction, discharge = saturation_point(tables, p_s), saturation_point(tables, p_d)
     return h_s, compressor(tables, p_s, suction, h_s, rho_s, p_d, discharge, 55.0, 308.15, params)
@@ -204,12 +210,34 @@ def test_compressor_by_hand(tables):
     assert 0.015 < m < 0.025
 
 
+def test_leaking_valves_deliver_less_and_hotter_gas_for_the_same_power(tables):
+    """A share f of the displaced gas leaks back: the delivered flow is (1 - f) of the sound
+    compressor's, the power is the same (all the gas is compressed), and the work on the gas
+    that leaked back heats the gas delivered; both laws hold."""
+    h_s, (m, h_d, power, _, w_is, _) = _compress(tables, 1.0, 1.0, 1.0, 1.0)
+    _, (m_f, h_d_f, power_f, net_f, w_is_f, ambient_f) = _compress(
+        tables, 1.0, 1.0, 1.0, 1.0, leakage=0.25
+    )
+    assert m_f == pytest.approx(0.75 * m, rel=1e-12)
+    assert power_f == pytest.approx(power, rel=1e-12)
+    assert w_is_f == pytest.approx(0.75 * w_is, rel=1e-12)  # of the gas delivered
+    assert h_d_f - h_s > (h_d - h_s) / 0.75 * 0.95  # hotter: nearly all the work in less gas
+    assert net_f + ambient_f == pytest.approx(power_f, rel=1e-12)
+    assert m_f * (h_d_f - h_s) == pytest.approx(net_f, rel=1e-12)
+    assert net_f >= w_is_f  # the delivered gas leaves above its isentropic state
+
+
 @pytest.mark.parametrize("cf_vol", [0.5, 1.5])
 @pytest.mark.parametrize("cf_pow", [0.3, 1.0, 2.0])
 @pytest.mark.parametrize("cf_pref", [0.3, 1.5])
 @pytest.mark.parametrize("cf_shell", [0.3, 1.5])
-def test_compressor_laws_at_the_corners_of_the_box(tables, cf_vol, cf_pow, cf_pref, cf_shell):
-    h_s, (_, h_d, power, net, w_is, ambient) = _compress(tables, cf_vol, cf_pow, cf_pref, cf_shell)
+@pytest.mark.parametrize("leakage", [0.0, 0.5])
+def test_compressor_laws_at_the_corners_of_the_box(
+    tables, cf_vol, cf_pow, cf_pref, cf_shell, leakage
+):
+    h_s, (_, h_d, power, net, w_is, ambient) = _compress(
+        tables, cf_vol, cf_pow, cf_pref, cf_shell, leakage=leakage
+    )
     h_is = h_from_ps(tables, 27.5e5, entropy(tables, 9.5e5, h_s))
     assert net <= power  # first law: no more to the refrigerant than the drive takes
     assert h_d >= h_is  # second law: discharge never below the isentropic state

@@ -101,10 +101,11 @@ def test_a_stated_tolerance_is_read_and_kept_by_changes(tmp_path):
 
 
 def test_the_fault_table_is_declared_apart_from_table_iii():
-    assert FAULTS.ids == ("DP_RESTR", "P_NCG")
-    assert [spec.unit for spec in FAULTS] == ["Pa", "Pa"]
+    assert FAULTS.ids == ("DP_RESTR", "P_NCG", "F_LEAK")
+    assert [spec.unit for spec in FAULTS] == ["Pa", "Pa", "1"]
     assert np.all(FAULTS.nominal == 0.0) and np.all(FAULTS.lows == 0.0)
     assert FAULTS["DP_RESTR"].high == 3.0e5 and FAULTS["P_NCG"].high == 2.0e5
+    assert FAULTS["F_LEAK"].high == 0.5
     assert all(spec.name for spec in FAULTS)  # a one-line meaning each
     for unit in (load_unit(), load_unit(HEAT_PUMP_UNIT)):  # both modes share the physics
         assert unit.faults is FAULTS
@@ -118,8 +119,8 @@ def test_one_mapping_reaches_both_tables():
     unit = load_unit()
     theta, faults = unit.parameter_vectors({"M0": 1.5, "P_NCG": 5e4})
     assert theta[0] == 1.5 and np.all(theta[1:] == unit.parameters.nominal[1:])
-    np.testing.assert_array_equal(faults, [0.0, 5e4])
-    np.testing.assert_array_equal(unit.parameter_vectors()[1], [0.0, 0.0])
+    np.testing.assert_array_equal(faults, [0.0, 5e4, 0.0])
+    np.testing.assert_array_equal(unit.parameter_vectors()[1], [0.0, 0.0, 0.0])
     assert unit.parameter_spec("DP_RESTR").unit == "Pa" and unit.parameter_spec("M0").unit == "kg"
     with pytest.raises(KeyError, match=r"unknown parameter id 'P_AIR'.*fault ids"):
         unit.parameter_spec("P_AIR")
@@ -133,4 +134,4 @@ def test_an_unknown_fault_id_is_one_line_naming_it_and_the_allowed_ones():
     message = str(refused.value)
     assert "\n" not in message
     assert message.startswith("unknown parameter id(s) ['P_AIR']; allowed are calibration ids")
-    assert "fault ids ['DP_RESTR', 'P_NCG']" in message and "'M0'" in message
+    assert "fault ids ['DP_RESTR', 'P_NCG', 'F_LEAK']" in message and "'M0'" in message

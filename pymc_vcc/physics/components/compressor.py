@@ -19,6 +19,14 @@ discharge enthalpy never below the isentropic one; shell loss never negative):
   ambient: φ/(1 - φ) = cf_pref φ₀/(1 - φ₀), so φ stays in (0, 1);
 * ``cf_shell`` scales the shell conductance UA; the loss is capped smoothly at φ L.
 
+A fault, apart from Table III: leaking valves (``valve_leakage`` f, a share of the displaced
+gas) return f ṁ_disp from the discharge to the suction, so the compressor delivers
+ṁ = (1 - f) ṁ_disp while it compresses all of ṁ_disp. The work on the returned gas ends in the
+gas it delivers (an extra loss f W_s, all to the refrigerant): a leaking compressor delivers
+less and hotter gas for the same power, and its isentropic power (of the gas delivered, what
+the laws are checked against) falls below the work it does. At f = 0 every result is unchanged
+bit for bit.
+
 CF_POW thus changes the electrical power (an optional output) and the discharge temperature,
 CF_PREF the discharge temperature only.
 """
@@ -49,6 +57,7 @@ COMPRESSOR_RECORD = np.dtype(
         ("cf_pow", np.float64),
         ("cf_pref", np.float64),
         ("cf_shell", np.float64),
+        ("valve_leakage", np.float64),  # share of the displaced gas leaking back (a fault), -
         ("T_discharge_max", np.float64),  # thermal limit of the discharge gas, K
         ("p_protection_start", np.float64),  # high-pressure protection: droop starts, Pa
         ("p_protection_stop", np.float64),  # ... and reaches 5 % speed, Pa
@@ -71,8 +80,16 @@ def volumetric_efficiency(
 def compressor_mass_flow(
     rho_suction: float, speed: float, displacement: float, eta_vol: float
 ) -> float:
-    """Mass flow, kg/s: η_v ρ_s V_disp n with speed n in rev/s and displacement in m³/rev."""
+    """Displaced mass flow, kg/s: η_v ρ_s V_disp n with speed n in rev/s and displacement in
+    m³/rev."""
     return eta_vol * rho_suction * displacement * speed
+
+
+@njit(cache=True, error_model="numpy")
+def delivered_mass_flow(displaced: float, valve_leakage: float) -> float:
+    """Mass flow the compressor delivers, kg/s: the displaced flow less the share leaking back
+    through its valves."""
+    return displaced * (1.0 - valve_leakage)
 
 
 @njit(cache=True, error_model="numpy")
@@ -118,10 +135,10 @@ def compressor(
     T_ambient: float,
     params,
 ) -> tuple[float, float, float, float, float, float]:
-    """(ṁ kg/s, discharge enthalpy J/kg, electrical power W, net power to the refrigerant W,
-    isentropic power W, heat to the ambient W) — see the module docstring. ``suction`` and
-    ``discharge`` are the :func:`~pymc_vcc.physics.refrigerant.saturation_point` of the two
-    pressures.
+    """(delivered ṁ kg/s, discharge enthalpy J/kg, electrical power W, net power to the
+    refrigerant W, isentropic power of the delivered gas W, heat to the ambient W) — see the
+    module docstring. ``suction`` and ``discharge`` are the
+    :func:`~pymc_vcc.physics.refrigerant.saturation_point` of the two pressures.
 
     ``params`` is a :data:`COMPRESSOR_RECORD`; its ``loss_share`` is φ₀, the nominal share of
     the losses heating the refrigerant. The discharge enthalpy's excess over the isentropic one
@@ -132,16 +149,18 @@ def compressor(
     eta_vol = volumetric_efficiency(
         p_discharge / p_suction, params.clearance, params.exponent, params.cf_vol
     )
-    mass_flow = compressor_mass_flow(rho_suction, speed, params.displacement, eta_vol)
+    displaced = compressor_mass_flow(rho_suction, speed, params.displacement, eta_vol)
+    mass_flow = delivered_mass_flow(displaced, params.valve_leakage)
     s_suction = entropy_at(tables, suction, p_suction, h_suction)
     dh_isentropic = smooth_pos(
         h_from_ps_at(tables, discharge, p_discharge, s_suction) - h_suction, 100.0
     )
     h_isentropic = h_suction + dh_isentropic
-    work_isentropic = mass_flow * dh_isentropic
+    work_isentropic = displaced * dh_isentropic
     power = electrical_power(work_isentropic, params.isentropic_efficiency, params.cf_pow)
-    loss_in_gas = loss_share_to_refrigerant(params.loss_share, params.cf_pref) * (
-        power - work_isentropic
+    loss_in_gas = (
+        loss_share_to_refrigerant(params.loss_share, params.cf_pref) * (power - work_isentropic)
+        + params.valve_leakage * work_isentropic
     )
     headroom = smooth_pos(
         h_from_pT_at(tables, discharge, p_discharge, params.T_discharge_max) - h_isentropic, 2e3
@@ -156,6 +175,6 @@ def compressor(
         h_discharge,
         power,
         to_refrigerant,
-        work_isentropic,
+        mass_flow * dh_isentropic,
         power - to_refrigerant,
     )

@@ -7,9 +7,10 @@ one section of the unit file each). The unit description names the coils by thei
 the cycle's mode (``[condenser]``, ``[evaporator]``) and the fans by where they sit
 (``[outdoor_fan]``, ``[indoor_fan]``); both modes take the paper's Table III parameters
 (:data:`PARAMETERS`), read the same inputs (:data:`INPUTS`) and write the same outputs
-(:data:`OUTPUTS`), and the same two faults (:data:`FAULTS`: a liquid-line restriction,
-non-condensable gas in the condenser). :func:`split_unit_constants` turns a unit, a Table III
-vector and a fault vector into one record whose fields the cycle modules read by name. The
+(:data:`OUTPUTS`), and the same three faults (:data:`FAULTS`: a liquid-line restriction,
+non-condensable gas in the condenser, leaking compressor valves). :func:`split_unit_constants`
+turns a unit, a Table III vector and a fault vector into one record whose fields the cycle
+modules read by name. The
 kernels both modes share (suction tank outlet, compressor flow through the lumped pressure
 drops, a coil cell's wall heat, the start-up fill profile) are here too.
 """
@@ -27,6 +28,7 @@ from numba import njit
 from pymc_vcc.physics.components.compressor import (
     COMPRESSOR_RECORD,
     compressor_mass_flow,
+    delivered_mass_flow,
     volumetric_efficiency,
 )
 from pymc_vcc.physics.components.fan import air_capacity_rate, fan_operating_point
@@ -199,6 +201,14 @@ FAULTS = declared_table(
             2.0e5,
             0.0,
         ),
+        ParameterSpec(
+            "F_LEAK",
+            "Compressor valve leakage: share of the displaced gas leaking back to the suction",
+            "1",
+            0.0,
+            0.5,
+            0.0,
+        ),
     )
 )
 """The split unit's fault parameters in either mode, apart from Table III (nominal 0: no fault;
@@ -209,7 +219,11 @@ passes it, what a service engineer reads across a filter-drier (3 bar: 5 K of sa
 temperature at 40 °C in R410A, a drier far past replacement). ``P_NCG``: the partial pressure
 of air trapped in the condenser, added to every pressure the high side presents (2 bar: about
 the air of a line set and indoor coil left unevacuated, 2.5 L at 1 bar, gathered in the
-condenser's vapour space). models/README.md, "Faults", gives the physics and its limits."""
+condenser's vapour space). ``F_LEAK``: the share of the gas the compressor displaces that
+leaks back through its valves to the suction (0.5: half the flow lost, a compressor close to
+failing); the compressor reads it from its own record
+(:data:`~pymc_vcc.physics.components.compressor.COMPRESSOR_RECORD`). models/README.md,
+"Faults", gives the physics and its limits."""
 
 RESTRICTION_RATING_T = 313.15
 """Saturated-liquid temperature of the restriction's rated drop, K (40 °C: the liquid line at
@@ -410,6 +424,7 @@ def split_unit_constants(
             "cf_pow": p["CF_POW"],
             "cf_pref": p["CF_PREF"],
             "cf_shell": p["CF_SHELL"],
+            "valve_leakage": fault["F_LEAK"],
             "T_discharge_max": comp.max_discharge_temperature,
             "p_protection_start": comp.protection_pressure_start,
             "p_protection_stop": comp.protection_pressure_stop,
@@ -542,7 +557,8 @@ def flow_through_drops(
         )[:2]
         eta = volumetric_efficiency(p_d / p_s, comp.clearance, comp.exponent, comp.cf_vol)
         rho_s = rho_out + drho_dp_out * (p_s - p_e)
-        return compressor_mass_flow(rho_s, speed, comp.displacement, eta)
+        displaced = compressor_mass_flow(rho_s, speed, comp.displacement, eta)
+        return delivered_mass_flow(displaced, comp.valve_leakage)
 
     m_a = 0.0
     r_a = compressor_flow(m_a)
