@@ -8,7 +8,8 @@ every *case* of :data:`CASES` (no fault, or one fault at a stated severity; the 
 other noise) and
 each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A case is scored
 
-* no-fault cases: ``false alarm`` when a fault is named, else ``correct``;
+* no-fault cases (none, or a change below its fault's threshold): ``false alarm`` when a fault
+  is named or two are not distinguishable, else ``correct``;
 * faulted cases: ``correct diagnosis`` when the fault is named, ``misdiagnosis`` when another
   is, ``missed detection`` on ``no fault``, ``no response`` when the verdict names none for
   sure (two faults not distinguishable, or only possible ones);
@@ -44,6 +45,8 @@ the healthy unit's value (calibration parameters) or the value itself (fault par
 
 CASES: tuple[Case, ...] = (
     (None, {}),
+    (None, {"M0": -0.05}),
+    (None, {"FI_FLOW": -0.10}),
     ("undercharge", {"M0": -0.20}),
     ("undercharge", {"M0": -0.30}),
     ("overcharge", {"M0": 0.20}),
@@ -54,9 +57,11 @@ CASES: tuple[Case, ...] = (
     ("liquid-line restriction", {"DP_RESTR": 150e3}),
     ("non-condensable gas", {"P_NCG": 120e3}),
 )
-"""The later records of each unit: none, or one fault above its detection threshold (fouling
-and low outdoor airflow each once: 60 % off the air-side HTC and 30 % off the outdoor airflow
-take 30 % and 26 % off the condenser's air-side conductance)."""
+"""The later records of each unit: no fault (the unit as it was, a 5 % charge loss, 10 % less
+indoor airflow: changes at half their thresholds, which Yuill and Braun count as no fault, so a
+verdict naming one is a false alarm), or one fault above its detection threshold (fouling and
+low outdoor airflow each once: 60 % off the air-side HTC and 30 % off the outdoor airflow take
+30 % and 26 % off the condenser's air-side conductance)."""
 
 UNIT_CHARGES = (1.3, 1.8)  # kg: a unit's commissioned charge is drawn between these
 """Commissioned charges leave room for a 30 % loss and a 20 % gain inside the unit's box

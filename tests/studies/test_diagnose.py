@@ -166,11 +166,16 @@ def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
 
     unit = load_unit()
     healthy = {spec.id: spec.nominal for spec in unit.parameters} | {"M0": 1.5}
+    before = {pid: np.array([value]) for pid, value in healthy.items()}
     for case in CASES:
         moved, intensity = _faulted(unit, healthy, case)
         fault, changes = case
-        if fault is None:
-            assert moved == healthy and intensity == 0.0
+        if fault is None:  # the unit as it was, or changes at most half a fault's threshold
+            assert intensity == 0.0 and set(changes) <= set(healthy)
+            after = {pid: np.array([value]) for pid, value in moved.items()}
+            for f in FAULTS:
+                if f.relative:
+                    assert f.intensity(after, before, unit)[0] <= f.threshold / 2 + 1e-12, case
             continue
         threshold = {f.name: f.threshold for f in FAULTS}[fault]
         assert intensity > threshold  # every case lies beyond its fault's detection threshold
