@@ -652,7 +652,7 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="the folder (or posterior.nc) written by `pymc-vcc calibrate` at commissioning",
     )
-    from pymc_vcc.studies.diagnose import FAULT_PROBABILITY
+    from pymc_vcc.studies.faults import FAULT_PROBABILITY
 
     diagnose.add_argument(
         "--fault-probability",

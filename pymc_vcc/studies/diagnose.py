@@ -1,17 +1,15 @@
 """Fault diagnosis: which fault, how severe, how sure, from a unit's later log.
 
 A later record is calibrated (:func:`~pymc_vcc.studies.unit_log.calibrate_record`, the same
-error budget) under a spike-and-slab prior (:func:`fault_prior`): the unit as commissioned, and
-with a small probability each fault's parameters anywhere in their ranges (the cycle's fault
-parameters, ``unit.faults``: a liquid-line restriction, non-condensable gas, leaking compressor
-valves, added near 0). Each fault of :data:`FAULTS` is then an *intensity* relative to
-commissioning, per posterior draw (each paired with a draw of the commissioning posterior, so
-that what commissioning left unknown widens it): a fraction of the commissioned value for the
-faults that move a calibration parameter (the charge, the condenser's air-side conductance, the
-indoor airflow), the fault parameter itself for the others (a restriction, the air, the
-compressor's valve leakage). Its posterior probability of lying beyond the fault's threshold
-names it (:data:`NAMED`); two faults that together are likely but neither alone are reported as
-not distinguishable, with the sensor that would tell them apart (:func:`separating_sensor`).
+error budget) under a spike-and-slab prior (:func:`~pymc_vcc.studies.unit_log.later_prior`):
+the unit as commissioned, and with a small probability each fault's parameters anywhere in
+their ranges (the cycle's fault parameters, ``unit.faults``: a liquid-line restriction,
+non-condensable gas, leaking compressor valves, added near 0). Each fault of
+:data:`~pymc_vcc.studies.faults.FAULTS` then has an *intensity* relative to commissioning per
+posterior draw (:func:`~pymc_vcc.studies.faults.fault_intensities`). Its posterior probability
+of lying beyond the fault's threshold names it (:data:`NAMED`); two faults that together are
+likely but neither alone are reported as not distinguishable, with the sensor that would tell
+them apart (:func:`separating_sensor`).
 
 The faults are the standard set of the fault-detection literature (Yuill and Braun's
 evaluation of FDD protocols; ASHRAE RP-1043): undercharge, overcharge, condenser fouling or low
@@ -22,200 +20,36 @@ non-condensable gas.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import xarray as xr
 from matplotlib.figure import Figure
-from scipy.special import expit, logit
 
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.error_model import SensorAccuracy, plateau_windows, summarise
-from pymc_vcc.inference.priors import GMMPrior
-from pymc_vcc.physics.cycles.split_unit import air_conductance
 from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
+from pymc_vcc.studies.faults import (
+    FAULT_PROBABILITY,
+    FAULTS,
+    Fault,
+    check_fault_probability,
+    fault_intensities,
+)
 from pymc_vcc.studies.record_budget import CHARGE, held_inputs, plateau_edges
 from pymc_vcc.studies.unit_log import (
     MODEL_CHARGE,
     RECORD_BUDGETS,
     SETTLE,
-    box_prior,
     calibrate_record,
+    later_prior,
 )
-
-
-@dataclass(frozen=True)
-class Fault:
-    """One fault of the standard set, as the model sees it.
-
-    Attributes:
-        name: what a service engineer calls it.
-        parameters: the parameters it moves (spread together by its slab in
-            :func:`fault_prior`; its intensity is the largest of their moves, unless it has a
-            :attr:`measure`).
-        direction: −1 if the fault lowers them, +1 if it raises them.
-        threshold: the smallest intensity that counts as the fault.
-        relative: intensity as a fraction of the commissioned value (else in the parameter's
-            own unit, from 0: a fault parameter is 0 on a healthy unit).
-        display: (unit, factor) of the intensity in the report (``("%", 100)``, ...).
-        measure: the quantity of the unit the intensity is taken on instead (unit, parameter
-            draws -> values), when the data see a combination of the parameters, not each.
-    """
-
-    name: str
-    parameters: tuple[str, ...]
-    direction: int
-    threshold: float
-    relative: bool = True
-    display: tuple[str, float] = ("%", 100.0)
-    measure: Callable[[Unit, Mapping[str, np.ndarray]], np.ndarray] | None = None
-
-    def intensity(
-        self,
-        draws: Mapping[str, np.ndarray],
-        commissioned: Mapping[str, np.ndarray],
-        unit: Unit | None = None,
-    ) -> np.ndarray:
-        """The fault's intensity per posterior draw.
-
-        Args:
-            draws: parameter -> its posterior draws.
-            commissioned: parameter -> its value at commissioning (relative faults), one
-                commissioning posterior draw paired with each of ``draws``.
-            unit: the unit, for a fault measured on a quantity derived from the parameters
-                (:attr:`measure`).
-        """
-        if self.measure is not None:
-            if unit is None:
-                raise ValueError(f"the intensity of {self.name!r} is measured on the unit")
-            before = self.measure(unit, commissioned)
-            return self.direction * (self.measure(unit, draws) / before - 1.0)
-        moves = []
-        for pid in self.parameters:
-            if self.relative:
-                moves.append(self.direction * (draws[pid] / commissioned[pid] - 1.0))
-            else:
-                moves.append(self.direction * draws[pid])
-        return np.max(moves, axis=0)
-
-
-def condenser_conductance(unit: Unit, draws: Mapping[str, np.ndarray]) -> np.ndarray:
-    """The condenser's effective air-side conductance of each draw, W/K
-    (:func:`~pymc_vcc.physics.cycles.split_unit.air_conductance`; parameters not drawn at
-    nominal).
-
-    Args:
-        unit: the unit.
-        draws: parameter -> values, one per draw (ids of neither table are ignored).
-    """
-    known = [pid for pid in draws if pid in unit.parameters.ids or pid in unit.faults.ids]
-    n = len(draws[known[0]])
-    values = np.empty(n)
-    for k in range(n):
-        theta, faults = unit.parameter_vectors({pid: float(draws[pid][k]) for pid in known})
-        constants = unit.cycle_model.constants(unit, theta, faults=faults)
-        values[k] = air_conductance(constants, "condenser", unit.discretisation.n_volumes)
-    return values
-
-
-FAULTS: tuple[Fault, ...] = (
-    Fault("undercharge", (CHARGE,), -1, 0.10),
-    Fault("overcharge", (CHARGE,), +1, 0.10),
-    Fault(
-        "condenser fouling or low outdoor airflow",
-        ("HTC_CA", "FO_FLOW"),
-        -1,
-        0.20,
-        measure=condenser_conductance,
-    ),
-    Fault("low indoor airflow", ("FI_FLOW",), -1, 0.20),
-    Fault("compressor valve leakage", ("F_LEAK",), +1, 0.10, False),
-    Fault("liquid-line restriction", ("DP_RESTR",), +1, 50e3, False, ("kPa", 1e-3)),
-    Fault("non-condensable gas", ("P_NCG",), +1, 50e3, False, ("kPa", 1e-3)),
-)
-"""The standard faults and their detection thresholds: charge ±10 % (the field's tolerance),
-the condenser's air-side conductance (fouling and outdoor airflow lower it alike) or the indoor
-airflow −20 %, 10 % of the compressor's displaced gas leaking back (at the rating point: the
-capacity −5 %, the evaporating pressure +30 kPa), a restriction of 50 kPa at the rated flow,
-50 kPa of non-condensable gas (about 2 % of the condensing pressure: twice a pressure sensor's
-accuracy)."""
-
-FAULT_PROBABILITY = 0.1
-"""Prior probability that a unit has any one fault (of a group of parameters a fault moves) at
-its later record; at most two at once (:meth:`~pymc_vcc.inference.priors.GMMPrior.with_slabs`).
-A healthy unit is the likelier prior state, so that a fault is named only when the data ask
-for it (a uniform prior put 83 % of its mass on a restriction above its threshold)."""
-HEALTHY_FAULT_FRACTION = 0.005
-"""Where a healthy unit's fault parameters lie, a fraction of their range from 0 (the median of
-a logit normal of sd 1: 95 % below 2 % of the range, far below every threshold)."""
 
 NAMED = 0.9  # a fault is named when P(intensity beyond its threshold) is at least this
 POSSIBLE = 0.5  # below NAMED and at least this: reported as possible
-
-
-def check_fault_probability(probability: float) -> None:
-    """Refuse a fault probability outside (0, 1), in one line."""
-    if not 0.0 < probability < 1.0:
-        raise ValueError(f"fault probability must lie in (0, 1), got {probability}")
-
-
-def fault_prior(
-    commissioning: xr.DataTree,
-    unit: Unit,
-    drift: float,
-    seed: int,
-    probability: float = FAULT_PROBABILITY,
-) -> GMMPrior:
-    """The prior of a later record to diagnose: the unit as commissioned (each parameter moved
-    by ``drift`` × its range, the charge the model's own, the fault parameters near 0) as the
-    spike, and each fault's parameters, with ``probability``, anywhere in their ranges.
-
-    The spike is one Gaussian with a full covariance (in the bounds' logit space): the
-    commissioning data pin combinations of parameters (the condenser's conductance, not its
-    HTC and airflow apart), which a diagonal spike, as wide as each parameter alone, would let
-    a later record move freely.
-
-    Args:
-        commissioning: the commissioning posterior.
-        unit: the unit.
-        drift: sd of each parameter's move since commissioning, a fraction of its range.
-        seed: seeds the mixture's fit.
-        probability: each fault's prior probability (:data:`FAULT_PROBABILITY`).
-    """
-    posterior = commissioning["posterior"]
-    names = [str(n) for n in posterior.data_vars if n in unit.parameters.ids]
-    samples = {n: posterior[n].values.ravel() for n in names}
-    samples[CHARGE] = posterior.get(MODEL_CHARGE, posterior[CHARGE]).values.ravel()
-    n_draws = len(samples[CHARGE])
-    rng = np.random.default_rng(seed)
-    for name in unit.faults.ids:
-        spec = unit.parameter_spec(name)
-        healthy = expit(logit(HEALTHY_FAULT_FRACTION) + rng.standard_normal(n_draws))
-        samples[name] = spec.low + (spec.high - spec.low) * healthy
-    drifts = {name: (drift if name in names else 0.0) for name in samples}
-    spike = GMMPrior.fit(
-        samples,
-        box_prior(unit, list(samples)),
-        max_components=1,
-        seed=seed,
-        drift=drifts,
-        covariance="full",
-    )
-    return spike.with_slabs(list(dict.fromkeys(fault.parameters for fault in FAULTS)), probability)
-
-
-def _moved_parameters(unit: Unit) -> list[str]:
-    """The calibration parameters a fault moves (the commissioning posterior must hold them)."""
-    return [
-        pid
-        for fault in FAULTS
-        if fault.relative
-        for pid in fault.parameters
-        if pid in unit.parameters.ids
-    ]
 
 
 @dataclass
@@ -423,30 +257,18 @@ def diagnose(
         solver: ODE solver.
         coils, rounds, method: as for :func:`~pymc_vcc.studies.unit_log.calibrate_record`.
         accuracy: the sensors' accuracy.
-        fault_probability: each fault's prior probability (:func:`fault_prior`).
+        fault_probability: each fault's prior probability
+            (:func:`~pymc_vcc.studies.unit_log.later_prior`).
     """
-    check_fault_probability(fault_probability)
     unit = load_unit() if unit is None else unit
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
-    needed = {pid for fault in FAULTS for pid in fault.parameters}
-    missing = sorted(needed - set(unit.parameters.ids) - set(unit.faults.ids))
-    if missing:
-        raise ValueError(
-            f"the unit's cycle lacks the fault parameter(s) {missing} the diagnosis needs"
-        )
     accuracy = SensorAccuracy() if accuracy is None else accuracy
+    prior = later_prior(commissioning, unit, drift, seed, fault_probability)
     posterior = commissioning["posterior"]
     commissioned = {
         str(n): float(posterior[n].mean()) for n in posterior.data_vars if n in unit.parameters.ids
     }
-    absent = [pid for pid in (CHARGE, *_moved_parameters(unit)) if pid not in commissioned]
-    if absent:
-        raise ValueError(
-            f"the commissioning posterior lacks {absent}; calibrate the healthy unit with "
-            "`pymc-vcc calibrate` (the charge and its nuisance parameters)"
-        )
-    prior = fault_prior(commissioning, unit, drift, seed, fault_probability)
     draws, error_draws = RECORD_BUDGETS[budget]
     tree = calibrate_record(
         observed,
@@ -454,7 +276,6 @@ def diagnose(
         executor,
         unit=unit,
         prior=prior,
-        parameters=prior.names,
         draws=draws,
         error_draws=error_draws,
         seed=seed,
@@ -465,10 +286,7 @@ def diagnose(
         accuracy=accuracy,
     )
     samples = {str(n): tree["posterior"][n].values.ravel() for n in tree["posterior"].data_vars}
-    n_commissioning = posterior.sizes["chain"] * posterior.sizes["draw"]
-    picks = np.random.default_rng(seed).integers(0, n_commissioning, len(samples[CHARGE]))
-    paired = {pid: posterior[pid].values.ravel()[picks] for pid in commissioned}
-    intensities = {f.name: f.intensity(samples, paired, unit) for f in FAULTS}
+    intensities = fault_intensities(samples, posterior, unit, seed)
     probabilities = {f.name: float(np.mean(intensities[f.name] >= f.threshold)) for f in FAULTS}
     text, pairs = verdict(probabilities)
     by_name = {f.name: f for f in FAULTS}

@@ -34,7 +34,8 @@ import xarray as xr
 
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
-from pymc_vcc.studies.diagnose import FAULTS, diagnose
+from pymc_vcc.studies.diagnose import diagnose
+from pymc_vcc.studies.faults import FAULTS
 from pymc_vcc.studies.record_budget import CHARGE
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
 from pymc_vcc.studies.unit_log import RECORD_BUDGETS, calibrate_record, record_budget_name

@@ -6,7 +6,9 @@ and the fan flows), marginalising them, under the error budget of
 :mod:`pymc_vcc.studies.record_budget` (sensor noise estimated from the record, sensor biases
 within their accuracy, and the model's error against a finer unit whose other parameters are
 spread around nominal, whose logged inputs are off and whose sensors lag). Their prior is the
-commissioning posterior when there is one (plus drift), else the unit's box.
+unit's box at commissioning; a later record's is the unit as commissioned, with drift, or with
+any of the standard faults (:func:`later_prior`: whatever else has changed takes its share of
+the data rather than push the charge).
 
 The model's coarse coils read as a different charge
 (:class:`~pymc_vcc.studies.record_budget.CoilOffset`): each calibration measures that offset
@@ -28,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import pymc as pm
 import xarray as xr
+from scipy.special import expit, logit
 
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.execution.options import RunOptions
@@ -37,13 +40,21 @@ from pymc_vcc.inference.error_model import (
     predictive_check,
     summarise,
 )
-from pymc_vcc.inference.priors import Prior, UniformPrior
+from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import OUTPUT_INTERVAL, VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
+from pymc_vcc.studies.faults import (
+    FAULT_PROBABILITY,
+    FAULTS,
+    HEALTHY_FAULT_FRACTION,
+    check_fault_probability,
+    fault_intensities,
+    moved_parameters,
+)
 from pymc_vcc.studies.record_budget import (
     CHARGE,
     ERROR_DRAWS,
@@ -362,7 +373,8 @@ class RecordResult:
         checks: per output, the predictive check (``z_mean``, ``p_value``, ``misfit``).
         n_simulations: every simulation the result rests on.
         wall_seconds: wall time, s.
-        alarm: P(charge < alarm fraction × commissioning charge), with a commissioning prior.
+        alarm: P(charge <= alarm fraction × commissioned charge) on a later record
+            (:func:`leak_alarm`).
         commissioning_kg: the commissioning posterior's mean charge, kg.
     """
 
@@ -405,24 +417,79 @@ class RecordResult:
         return "\n".join(lines)
 
 
-def commissioning_prior(
-    posterior: xr.DataTree, unit: Unit, drift: float, seed: int
-) -> tuple[Prior, float]:
-    """The prior of a later record from a commissioning posterior: its parameters as they were
-    (a Gaussian mixture, each draw moved by ``drift`` × the range), the charge uniform on its
-    bounds (a leak may have moved it anywhere); and the commissioned charge, kg."""
-    from pymc_vcc.inference.priors import GMMPrior
+def later_prior(
+    commissioning: xr.DataTree,
+    unit: Unit,
+    drift: float,
+    seed: int,
+    probability: float = FAULT_PROBABILITY,
+) -> GMMPrior:
+    """The prior of a later record of a commissioned unit (a spike and slabs): the unit as
+    commissioned (each parameter moved by ``drift`` × its range, the charge the model's own,
+    the fault parameters near 0) as the spike, and each fault's parameters
+    (:data:`~pymc_vcc.studies.faults.FAULTS`), with ``probability``, anywhere in their ranges,
+    at most two faults at once.
 
-    names = [str(n) for n in posterior["posterior"].data_vars if n in unit.parameters.ids]
-    if CHARGE not in names:
-        raise ValueError(f"the commissioning posterior has no {CHARGE}; it has {names}")
-    samples = {n: posterior["posterior"][n].values.ravel() for n in names}
-    commissioned = float(samples[CHARGE].mean())
-    spec = unit.parameter_spec(CHARGE)
-    samples[CHARGE] = np.random.default_rng(seed).uniform(spec.low, spec.high, len(samples[CHARGE]))
-    moved = {name: (0.0 if name == CHARGE else drift) for name in samples}
-    prior = GMMPrior.fit(samples, box_prior(unit, list(samples)), seed=seed, drift=moved)
-    return prior, commissioned
+    The spike is one Gaussian with a full covariance (in the bounds' logit space): the
+    commissioning data pin combinations of parameters (the condenser's conductance, not its
+    HTC and airflow apart), which a diagonal spike, as wide as each parameter alone, would let
+    a later record move freely. A healthy unit is the likelier state before the data are seen,
+    so that a change is found only when the data ask for it, and whatever else has changed
+    can take its share of the data rather than push the charge.
+
+    Args:
+        commissioning: the commissioning posterior (it must hold the charge and every
+            calibration parameter a fault moves, as ``pymc-vcc calibrate`` writes it).
+        unit: the unit (its cycle must have the fault parameters).
+        drift: sd of each parameter's move since commissioning, a fraction of its range.
+        seed: seeds the mixture's fit.
+        probability: each fault's prior probability
+            (:data:`~pymc_vcc.studies.faults.FAULT_PROBABILITY`).
+    """
+    check_fault_probability(probability)
+    needed = {pid for fault in FAULTS for pid in fault.parameters}
+    lacking = sorted(needed - set(unit.parameters.ids) - set(unit.faults.ids))
+    if lacking:
+        raise ValueError(f"the unit's cycle lacks the fault parameter(s) {lacking}")
+    posterior = commissioning["posterior"]
+    names = [str(n) for n in posterior.data_vars if n in unit.parameters.ids]
+    absent = [pid for pid in (CHARGE, *moved_parameters(unit)) if pid not in names]
+    if absent:
+        raise ValueError(
+            f"the commissioning posterior lacks {absent}; calibrate the healthy unit with "
+            "`pymc-vcc calibrate` (the charge and its nuisance parameters)"
+        )
+    samples = {n: posterior[n].values.ravel() for n in names}
+    samples[CHARGE] = posterior.get(MODEL_CHARGE, posterior[CHARGE]).values.ravel()
+    n_draws = len(samples[CHARGE])
+    rng = np.random.default_rng(seed)
+    for name in unit.faults.ids:
+        spec = unit.parameter_spec(name)
+        healthy = expit(logit(HEALTHY_FAULT_FRACTION) + rng.standard_normal(n_draws))
+        samples[name] = spec.low + (spec.high - spec.low) * healthy
+    drifts = {name: (drift if name in names else 0.0) for name in samples}
+    spike = GMMPrior.fit(
+        samples,
+        box_prior(unit, list(samples)),
+        max_components=1,
+        seed=seed,
+        drift=drifts,
+        covariance="full",
+    )
+    return spike.with_slabs(list(dict.fromkeys(fault.parameters for fault in FAULTS)), probability)
+
+
+def leak_alarm(
+    later: xr.DataTree, commissioning: xr.DataTree, unit: Unit, fraction: float, seed: int
+) -> float:
+    """The leak alarm's probability: that the charge of a later record's posterior is below
+    ``fraction`` of the commissioned one, each draw paired with a commissioning draw (the
+    undercharge's intensity beyond 1 − ``fraction``,
+    :func:`~pymc_vcc.studies.faults.fault_intensities`)."""
+    draws = {str(n): later["posterior"][n].values.ravel() for n in later["posterior"].data_vars}
+    undercharge = next(fault for fault in FAULTS if fault.name == "undercharge")
+    loss = fault_intensities(draws, commissioning["posterior"], unit, seed, [undercharge])
+    return float(np.mean(loss[undercharge.name] >= 1.0 - fraction))
 
 
 def load_commissioning(path: str | Path) -> xr.DataTree:
@@ -459,9 +526,9 @@ def record_study(
         column_map: its column map (TOML; default: ``LOG.columns.toml`` beside it).
         unit: the unit description (default: the built-in split unit).
         commissioning: a folder (or ``posterior.nc``) written by a calibration of the healthy
-            unit; then the leak check against it.
-        drift: sd of each nuisance parameter's change since commissioning, a fraction of its
-            range.
+            unit; then the leak check against it (prior :func:`later_prior`, alarm
+            :func:`leak_alarm`).
+        drift: sd of each parameter's change since commissioning, a fraction of its range.
         alarm_fraction: the alarm's threshold, a fraction of the commissioned charge.
         rounds, coils, method: as for :func:`calibrate_record`.
     """
@@ -476,11 +543,11 @@ def record_study(
     budget = record_budget_name(settings)
     unit = unit or load_unit()
     measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
-    prior, commissioned = None, None
+    prior, commissioned, before = None, None, None
     if commissioning is not None:
-        prior, commissioned = commissioning_prior(
-            load_commissioning(commissioning), unit, drift, settings.seed
-        )
+        before = load_commissioning(commissioning)
+        prior = later_prior(before, unit, drift, settings.seed)
+        commissioned = float(before["posterior"][CHARGE].mean())
     draws, error_draws = RECORD_BUDGETS[budget]
     with settings.claim_output("calibrate" if commissioning is None else "leak"):
         with settings.open_executor() as executor:
@@ -501,9 +568,8 @@ def record_study(
         stats = tree["sample_stats"]
         checks = predictive_checks(tree)
         alarm = None
-        if commissioned is not None:
-            draws_kg = tree["posterior"][CHARGE].values.ravel()
-            alarm = float(np.mean(draws_kg < alarm_fraction * commissioned))
+        if before is not None:
+            alarm = leak_alarm(tree, before, unit, alarm_fraction, settings.seed)
         result = RecordResult(
             tree=tree,
             charge=charge_summary(tree),
@@ -514,8 +580,6 @@ def record_study(
             commissioning_kg=commissioned,
         )
         if settings.out is not None:
-            from pymc_vcc.inference.priors import GMMPrior
-
             out = settings.out
             write_netcdf(tree, out / POSTERIOR_FILE)
             names = [n for n in tree["posterior"].data_vars if n in unit.parameters.ids]

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from pymc_vcc.studies.diagnose import FAULTS, NAMED, verdict
+from pymc_vcc.studies.diagnose import NAMED, verdict
+from pymc_vcc.studies.faults import FAULTS
 
 
 def test_intensity_is_relative_to_commissioning_or_the_fault_parameter_itself():
@@ -23,7 +24,7 @@ def test_fouling_and_low_outdoor_airflow_are_one_drop_of_the_condensers_conducta
     the fault's intensity is that conductance's drop, which either lowers, less than in
     proportion (ε-NTU)."""
     from pymc_vcc.physics.unit import load_unit
-    from pymc_vcc.studies.diagnose import condenser_conductance
+    from pymc_vcc.studies.faults import condenser_conductance
 
     unit = load_unit()
     htc, flow = unit.parameters["HTC_CA"].nominal, unit.parameters["FO_FLOW"].nominal
@@ -60,7 +61,8 @@ def test_the_prior_holds_a_healthy_unit_likelier_than_any_fault():
     import xarray as xr
 
     from pymc_vcc.physics.unit import load_unit
-    from pymc_vcc.studies.diagnose import FAULT_PROBABILITY, fault_prior
+    from pymc_vcc.studies.faults import FAULT_PROBABILITY
+    from pymc_vcc.studies.unit_log import later_prior
 
     unit = load_unit()
     rng = np.random.default_rng(0)
@@ -68,7 +70,7 @@ def test_the_prior_holds_a_healthy_unit_likelier_than_any_fault():
     draws = {pid: value * (1 + 0.01 * rng.standard_normal(200)) for pid, value in nominal.items()}
     draws["M0_model"] = draws["M0"] + 0.05
     posterior = xr.Dataset({pid: (("chain", "draw"), v[None]) for pid, v in draws.items()})
-    prior = fault_prior(xr.DataTree.from_dict({"posterior": posterior}), unit, 0.03, 1)
+    prior = later_prior(xr.DataTree.from_dict({"posterior": posterior}), unit, 0.03, 1)
     sample = prior.sample(20_000, rng)
     column = {name: sample[:, i] for i, name in enumerate(prior.names)}
     assert np.median(column["M0"]) == pytest.approx(nominal["M0"] + 0.05, abs=0.01)
@@ -79,6 +81,44 @@ def test_the_prior_holds_a_healthy_unit_likelier_than_any_fault():
         assert np.mean(beyond) <= FAULT_PROBABILITY, fault.name
         if not fault.relative:
             assert np.median(column[fault.parameters[0]]) < fault.threshold / 10, fault.name
+
+
+def _posterior(draws):
+    import xarray as xr
+
+    dataset = xr.Dataset(
+        {pid: (("chain", "draw"), np.asarray(v)[None]) for pid, v in draws.items()}
+    )
+    return xr.DataTree.from_dict({"posterior": dataset})
+
+
+def test_a_commissioning_posterior_without_the_moved_parameters_is_refused_in_one_line():
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.unit_log import later_prior
+
+    with pytest.raises(ValueError, match=r"lacks \['FI_FLOW'\]; calibrate the healthy unit") as e:
+        later_prior(_posterior({"M0": [1.5] * 8, "HTC_CA": [40.0] * 8, "FO_FLOW": [1.0] * 8}),
+                    load_unit(), 0.03, 0)  # fmt: skip
+    assert "\n" not in str(e.value)
+
+
+def test_the_leak_alarm_is_the_undercharge_beyond_its_fraction_paired_with_commissioning():
+    """Each later draw against a commissioning draw: a charge 15 % below every commissioning
+    draw sounds the alarm at 0.9 for sure, 5 % below never, and against a commissioning
+    posterior spread ±19 % a later charge at its mean sounds it as often as the commissioning
+    draws lie 11 % or more above it (about a fifth: not 0, as against the mean alone)."""
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.unit_log import leak_alarm
+
+    unit = load_unit()
+    pinned = _posterior({"M0": [1.6] * 100})
+    assert leak_alarm(_posterior({"M0": [1.6 * 0.85] * 400}), pinned, unit, 0.9, 0) == 1.0
+    assert leak_alarm(_posterior({"M0": [1.6 * 0.95] * 400}), pinned, unit, 0.9, 0) == 0.0
+    commissioned = np.linspace(1.3, 1.9, 101)
+    alarm = leak_alarm(_posterior({"M0": [1.6] * 4000}), _posterior({"M0": commissioned}), unit,
+                       0.9, 0)  # fmt: skip
+    assert alarm == pytest.approx(np.mean(commissioned >= 1.6 / 0.9), abs=0.03)
+    assert alarm > 0.15
 
 
 def test_verdict_names_one_several_none_or_the_pair_it_cannot_separate():

@@ -1,0 +1,184 @@
+"""The standard faults of a vapour-compression unit, as the model sees them.
+
+Each fault of the fault-detection literature's standard set (Yuill and Braun's evaluation of
+FDD protocols; ASHRAE RP-1043) moves some of the unit's parameters (a calibration parameter of
+Table III, or one of the cycle's fault parameters, ``unit.faults``). Its *intensity* on a later
+record is taken relative to the unit as commissioned, each later posterior draw paired with a
+draw of the commissioning posterior (:func:`fault_intensities`), so that what commissioning
+left unknown widens it; a fault counts beyond its detection threshold. The diagnosis
+(:mod:`pymc_vcc.studies.diagnose`) names faults from these intensities; the leak alarm
+(:mod:`pymc_vcc.studies.unit_log`) is the undercharge's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from pymc_vcc.physics.cycles.split_unit import air_conductance
+from pymc_vcc.physics.unit import Unit
+from pymc_vcc.studies.record_budget import CHARGE
+
+
+@dataclass(frozen=True)
+class Fault:
+    """One fault of the standard set, as the model sees it.
+
+    Attributes:
+        name: what a service engineer calls it.
+        parameters: the parameters it moves (spread together by its slab in
+            :func:`~pymc_vcc.studies.unit_log.later_prior`; its intensity is the largest of
+            their moves, unless it has a :attr:`measure`).
+        direction: −1 if the fault lowers them, +1 if it raises them.
+        threshold: the smallest intensity that counts as the fault.
+        relative: intensity as a fraction of the commissioned value (else in the parameter's
+            own unit, from 0: a fault parameter is 0 on a healthy unit).
+        display: (unit, factor) of the intensity in the report (``("%", 100)``, ...).
+        measure: the quantity of the unit the intensity is taken on instead (unit, parameter
+            draws -> values), when the data see a combination of the parameters, not each.
+    """
+
+    name: str
+    parameters: tuple[str, ...]
+    direction: int
+    threshold: float
+    relative: bool = True
+    display: tuple[str, float] = ("%", 100.0)
+    measure: Callable[[Unit, Mapping[str, np.ndarray]], np.ndarray] | None = None
+
+    def intensity(
+        self,
+        draws: Mapping[str, np.ndarray],
+        commissioned: Mapping[str, np.ndarray],
+        unit: Unit | None = None,
+    ) -> np.ndarray:
+        """The fault's intensity per posterior draw.
+
+        Args:
+            draws: parameter -> its posterior draws.
+            commissioned: parameter -> its value at commissioning (relative faults), one
+                commissioning posterior draw paired with each of ``draws``.
+            unit: the unit, for a fault measured on a quantity derived from the parameters
+                (:attr:`measure`).
+        """
+        if self.measure is not None:
+            if unit is None:
+                raise ValueError(f"the intensity of {self.name!r} is measured on the unit")
+            before = self.measure(unit, commissioned)
+            return self.direction * (self.measure(unit, draws) / before - 1.0)
+        moves = []
+        for pid in self.parameters:
+            if self.relative:
+                moves.append(self.direction * (draws[pid] / commissioned[pid] - 1.0))
+            else:
+                moves.append(self.direction * draws[pid])
+        return np.max(moves, axis=0)
+
+
+def condenser_conductance(unit: Unit, draws: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The condenser's effective air-side conductance of each draw, W/K
+    (:func:`~pymc_vcc.physics.cycles.split_unit.air_conductance`; parameters not drawn at
+    nominal).
+
+    Args:
+        unit: the unit.
+        draws: parameter -> values, one per draw (ids of neither table are ignored).
+    """
+    known = [pid for pid in draws if pid in unit.parameters.ids or pid in unit.faults.ids]
+    n = len(draws[known[0]])
+    values = np.empty(n)
+    for k in range(n):
+        theta, faults = unit.parameter_vectors({pid: float(draws[pid][k]) for pid in known})
+        constants = unit.cycle_model.constants(unit, theta, faults=faults)
+        values[k] = air_conductance(constants, "condenser", unit.discretisation.n_volumes)
+    return values
+
+
+FAULTS: tuple[Fault, ...] = (
+    Fault("undercharge", (CHARGE,), -1, 0.10),
+    Fault("overcharge", (CHARGE,), +1, 0.10),
+    Fault(
+        "condenser fouling or low outdoor airflow",
+        ("HTC_CA", "FO_FLOW"),
+        -1,
+        0.20,
+        measure=condenser_conductance,
+    ),
+    Fault("low indoor airflow", ("FI_FLOW",), -1, 0.20),
+    Fault("compressor valve leakage", ("F_LEAK",), +1, 0.10, False),
+    Fault("liquid-line restriction", ("DP_RESTR",), +1, 50e3, False, ("kPa", 1e-3)),
+    Fault("non-condensable gas", ("P_NCG",), +1, 50e3, False, ("kPa", 1e-3)),
+)
+"""The standard faults and their detection thresholds: charge ±10 % (the field's tolerance),
+the condenser's air-side conductance (fouling and outdoor airflow lower it alike) or the indoor
+airflow −20 %, 10 % of the compressor's displaced gas leaking back (at the rating point: the
+capacity −5 %, the evaporating pressure +30 kPa), a restriction of 50 kPa at the rated flow,
+50 kPa of non-condensable gas (about 2 % of the condensing pressure: twice a pressure sensor's
+accuracy)."""
+
+FAULT_PROBABILITY = 0.1
+"""Prior probability that a unit has any one fault (of a group of parameters a fault moves) at
+its later record; at most two at once (:meth:`~pymc_vcc.inference.priors.GMMPrior.with_slabs`).
+A healthy unit is the likelier prior state, so that a fault is named only when the data ask
+for it (a uniform prior put 83 % of its mass on a restriction above its threshold)."""
+HEALTHY_FAULT_FRACTION = 0.005
+"""Where a healthy unit's fault parameters lie, a fraction of their range from 0 (the median of
+a logit normal of sd 1: 95 % below 2 % of the range, far below every threshold)."""
+
+
+def check_fault_probability(probability: float) -> None:
+    """Refuse a fault probability outside (0, 1), in one line."""
+    if not 0.0 < probability < 1.0:
+        raise ValueError(f"fault probability must lie in (0, 1), got {probability}")
+
+
+def moved_parameters(unit: Unit) -> list[str]:
+    """The calibration parameters a fault moves (a commissioning posterior must hold them)."""
+    return [
+        pid
+        for fault in FAULTS
+        if fault.relative
+        for pid in fault.parameters
+        if pid in unit.parameters.ids
+    ]
+
+
+def fault_intensities(
+    later: Mapping[str, np.ndarray],
+    commissioning: xr.Dataset,
+    unit: Unit,
+    seed: int,
+    faults: Sequence[Fault] = FAULTS,
+) -> dict[str, np.ndarray]:
+    """Each fault's intensity per draw of a later record's posterior.
+
+    Args:
+        later: parameter -> the later posterior's draws (the unit's charge in ``M0``).
+        commissioning: the commissioning posterior (its ``posterior`` group); one of its draws,
+            picked at random (``seed``), is paired with each later draw.
+        unit: the unit.
+        seed: seeds the pairing.
+        faults: the faults (default: the standard set).
+    """
+    n_commissioning = commissioning.sizes["chain"] * commissioning.sizes["draw"]
+    picks = np.random.default_rng(seed).integers(0, n_commissioning, len(later[CHARGE]))
+    paired = {
+        str(pid): commissioning[pid].values.ravel()[picks]
+        for pid in commissioning.data_vars
+        if pid in unit.parameters.ids
+    }
+    return {fault.name: fault.intensity(later, paired, unit) for fault in faults}
+
+
+__all__ = [
+    "FAULTS",
+    "FAULT_PROBABILITY",
+    "Fault",
+    "check_fault_probability",
+    "condenser_conductance",
+    "fault_intensities",
+    "moved_parameters",
+]
