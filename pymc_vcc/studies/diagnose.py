@@ -45,11 +45,11 @@ from pymc_vcc.studies.unit_log import (
     RECORD_BUDGETS,
     SETTLE,
     calibrate_record,
-    later_prior,
 )
 
 NAMED = 0.9  # a fault is named when P(intensity beyond its threshold) is at least this
 POSSIBLE = 0.5  # below NAMED and at least this: reported as possible
+COOLING = "split-cooling"  # the cycle whose coils the standard faults name
 
 
 @dataclass
@@ -260,11 +260,16 @@ def diagnose(
         fault_probability: each fault's prior probability
             (:func:`~pymc_vcc.studies.unit_log.later_prior`).
     """
+    check_fault_probability(fault_probability)
     unit = load_unit() if unit is None else unit
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
+    if unit.cycle != COOLING:
+        raise ValueError(
+            f"the diagnosis knows the faults of a unit cooling ({COOLING!r}); this unit's cycle "
+            f"is {unit.cycle!r}"
+        )
     accuracy = SensorAccuracy() if accuracy is None else accuracy
-    prior = later_prior(commissioning, unit, drift, seed, fault_probability)
     posterior = commissioning["posterior"]
     commissioned = {
         str(n): float(posterior[n].mean()) for n in posterior.data_vars if n in unit.parameters.ids
@@ -275,7 +280,9 @@ def diagnose(
         inputs,
         executor,
         unit=unit,
-        prior=prior,
+        commissioning=commissioning,
+        drift=drift,
+        fault_probability=fault_probability,
         draws=draws,
         error_draws=error_draws,
         seed=seed,
@@ -292,7 +299,8 @@ def diagnose(
     by_name = {f.name: f for f in FAULTS}
     point = {name: float(values.mean()) for name, values in samples.items()}
     point[CHARGE] = point.get(MODEL_CHARGE, point[CHARGE])
-    point = {k: v for k, v in point.items() if k in prior.names}
+    inferred = {*unit.parameters.ids, *unit.faults.ids}
+    point = {k: v for k, v in point.items() if k in inferred}
     model = VCCSimulator(
         unit,
         held_inputs(inputs),

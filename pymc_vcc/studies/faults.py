@@ -12,8 +12,10 @@ left unknown widens it; a fault counts beyond its detection threshold. The diagn
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import xarray as xr
@@ -78,12 +80,15 @@ class Fault:
         return np.max(moves, axis=0)
 
 
-def condenser_conductance(unit: Unit, draws: Mapping[str, np.ndarray]) -> np.ndarray:
-    """The condenser's effective air-side conductance of each draw, W/K
+def coil_conductance(
+    coil: Literal["condenser", "evaporator"], unit: Unit, draws: Mapping[str, np.ndarray]
+) -> np.ndarray:
+    """A coil's effective air-side conductance of each draw, W/K
     (:func:`~pymc_vcc.physics.cycles.split_unit.air_conductance`; parameters not drawn at
     nominal).
 
     Args:
+        coil: which coil.
         unit: the unit.
         draws: parameter -> values, one per draw (ids of neither table are ignored).
     """
@@ -93,7 +98,7 @@ def condenser_conductance(unit: Unit, draws: Mapping[str, np.ndarray]) -> np.nda
     for k in range(n):
         theta, faults = unit.parameter_vectors({pid: float(draws[pid][k]) for pid in known})
         constants = unit.cycle_model.constants(unit, theta, faults=faults)
-        values[k] = air_conductance(constants, "condenser", unit.discretisation.n_volumes)
+        values[k] = air_conductance(constants, coil, unit.discretisation.n_volumes)
     return values
 
 
@@ -105,25 +110,36 @@ FAULTS: tuple[Fault, ...] = (
         ("HTC_CA", "FO_FLOW"),
         -1,
         0.20,
-        measure=condenser_conductance,
+        measure=functools.partial(coil_conductance, "condenser"),
     ),
-    Fault("low indoor airflow", ("FI_FLOW",), -1, 0.20),
+    Fault(
+        "low indoor airflow",
+        ("FI_FLOW", "HTC_EA"),
+        -1,
+        0.20,
+        measure=functools.partial(coil_conductance, "evaporator"),
+    ),
     Fault("compressor valve leakage", ("F_LEAK",), +1, 0.10, False),
     Fault("liquid-line restriction", ("DP_RESTR",), +1, 50e3, False, ("kPa", 1e-3)),
     Fault("non-condensable gas", ("P_NCG",), +1, 50e3, False, ("kPa", 1e-3)),
 )
-"""The standard faults and their detection thresholds: charge ±10 % (the field's tolerance),
-the condenser's air-side conductance (fouling and outdoor airflow lower it alike) or the indoor
-airflow −20 %, 10 % of the compressor's displaced gas leaking back (at the rating point: the
-capacity −5 %, the evaporating pressure +30 kPa), a restriction of 50 kPa at the rated flow,
-50 kPa of non-condensable gas (about 2 % of the condensing pressure: twice a pressure sensor's
-accuracy)."""
+"""The standard faults of a unit cooling, and their detection thresholds: charge ±10 % (the
+field's tolerance), the condenser's or the evaporator's air-side conductance −20 % (a coil's
+fouling and its fan's airflow lower it alike, and the data see it, not each: commissioning pins
+the conductances to a few per cent and leaves the HTC and the airflow apart at ±25-35 %; a
+dirty indoor coil thus reads as low indoor airflow), 10 % of the compressor's displaced gas
+leaking back (at the rating point: the capacity −5 %, the evaporating pressure +30 kPa), a
+restriction of 50 kPa at the rated flow, 50 kPa of non-condensable gas (about 2 % of the
+condensing pressure: twice a pressure sensor's accuracy)."""
 
 FAULT_PROBABILITY = 0.1
 """Prior probability that a unit has any one fault (of a group of parameters a fault moves) at
 its later record; at most two at once (:meth:`~pymc_vcc.inference.priors.GMMPrior.with_slabs`).
 A healthy unit is the likelier prior state, so that a fault is named only when the data ask
 for it (a uniform prior put 83 % of its mass on a restriction above its threshold)."""
+ERROR_FAULT_PROBABILITY = 0.5
+"""Each fault's probability in the prior a later record's model error is drawn at: the error
+must be known where the data may lie, faulty or not, not only at the unit as commissioned."""
 HEALTHY_FAULT_FRACTION = 0.005
 """Where a healthy unit's fault parameters lie, a fraction of their range from 0 (the median of
 a logit normal of sd 1: 95 % below 2 % of the range, far below every threshold)."""
@@ -178,7 +194,7 @@ __all__ = [
     "FAULT_PROBABILITY",
     "Fault",
     "check_fault_probability",
-    "condenser_conductance",
+    "coil_conductance",
     "fault_intensities",
     "moved_parameters",
 ]

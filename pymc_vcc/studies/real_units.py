@@ -35,7 +35,6 @@ from pymc_vcc.studies.unit_log import (
     calibrate_record,
     charge_summary,
     check_method,
-    later_prior,
     leak_alarm,
     predictive_checks,
     record_budget_name,
@@ -79,14 +78,14 @@ class RealUnitsResult:
         return "\n".join(lines)
 
 
-def _calibrated(truth, executor, settings: StudySettings, budget, prior=None):
+def _calibrated(truth, executor, settings: StudySettings, budget, commissioning=None):
     draws, error_draws, rounds, method = budget
     started = time.perf_counter()
     tree = calibrate_record(
         truth.observed,
         truth.inputs,
         executor,
-        prior=prior,
+        commissioning=commissioning,
         draws=draws,
         error_draws=error_draws,
         rounds=rounds,
@@ -110,7 +109,6 @@ def _dataset(variant, seed, executor, settings, budget, alarm, unit) -> dict:
     row["covers"] = row["low_kg"] <= truth.charge <= row["high_kg"]
     if not alarm:
         return row
-    prior = later_prior(tree, unit, 0.03, seed)
     for name, charge in (("unchanged", truth.charge), ("leaked", (1 - LOSS) * truth.charge)):
         later = generate_truth(
             variant,
@@ -120,7 +118,7 @@ def _dataset(variant, seed, executor, settings, budget, alarm, unit) -> dict:
             n_volumes=truth.n_volumes,
             sensors=truth,
         )
-        later_tree, _ = _calibrated(later, executor, settings, budget, prior)
+        later_tree, _ = _calibrated(later, executor, settings, budget, tree)
         row[f"alarm_{name}"] = leak_alarm(later_tree, tree, unit, ALARM_FRACTION, seed)
     return row
 

@@ -48,6 +48,7 @@ from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import OUTPUT_INTERVAL, VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.faults import (
+    ERROR_FAULT_PROBABILITY,
     FAULT_PROBABILITY,
     FAULTS,
     HEALTHY_FAULT_FRACTION,
@@ -141,6 +142,9 @@ def calibrate_record(
     *,
     unit: Unit | None = None,
     prior: Prior | None = None,
+    commissioning: xr.DataTree | None = None,
+    drift: float = 0.03,
+    fault_probability: float = FAULT_PROBABILITY,
     parameters: Sequence[str] = (CHARGE, *NUISANCE),
     accuracy: SensorAccuracy | None = None,
     draws: int = RECORD_BUDGETS["small"][0],
@@ -159,8 +163,14 @@ def calibrate_record(
         inputs: the logged inputs over the record.
         executor: runs the simulations.
         unit: the unit description (default: the built-in split unit).
-        prior: prior of ``parameters`` (default: uniform on the unit's bounds); a
-            commissioning posterior's mixture for a later record.
+        prior: prior of ``parameters`` (default: uniform on the unit's bounds).
+        commissioning: for a later record of a commissioned unit, instead of ``prior``: the
+            commissioning posterior, whose :func:`later_prior` (with ``drift`` and
+            ``fault_probability``) is the prior. The model's error is then first drawn where
+            each fault is as likely as not
+            (:data:`~pymc_vcc.studies.faults.ERROR_FAULT_PROBABILITY`): drawn at the unit as
+            commissioned, it missed how the model errs at a 20 % overcharge (+9 % read).
+        drift, fault_probability: see :func:`later_prior`.
         parameters: the inferred parameters (default: the charge and :data:`NUISANCE`).
         accuracy: the sensors' and logged inputs' accuracy.
         draws: SMC particles.
@@ -191,6 +201,12 @@ def calibrate_record(
         simulation's count (``n_simulations``).
     """
     unit = load_unit() if unit is None else unit
+    error_prior = None
+    if commissioning is not None:
+        if prior is not None:
+            raise ValueError("a later record takes a prior or a commissioning posterior, not both")
+        prior = later_prior(commissioning, unit, drift, seed, fault_probability)
+        error_prior = later_prior(commissioning, unit, drift, seed, ERROR_FAULT_PROBABILITY)
     prior = box_prior(unit, parameters) if prior is None else prior
     if rounds < 1:
         raise ValueError(f"rounds must be at least 1, got {rounds}")
@@ -209,6 +225,8 @@ def calibrate_record(
     )
     accuracy = SensorAccuracy() if accuracy is None else accuracy
     thetas, simulations, offset = None, 0, None
+    if error_prior is not None:
+        thetas = error_prior.sample(error_draws, rng)
     if CHARGE in prior.names and coils == "finer":
         sensors = SensorBudget.of(model, observed, accuracy)
         spec = unit.parameters[CHARGE]
@@ -543,10 +561,9 @@ def record_study(
     budget = record_budget_name(settings)
     unit = unit or load_unit()
     measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
-    prior, commissioned, before = None, None, None
+    commissioned, before = None, None
     if commissioning is not None:
         before = load_commissioning(commissioning)
-        prior = later_prior(before, unit, drift, settings.seed)
         commissioned = float(before["posterior"][CHARGE].mean())
     draws, error_draws = RECORD_BUDGETS[budget]
     with settings.claim_output("calibrate" if commissioning is None else "leak"):
@@ -556,7 +573,8 @@ def record_study(
                 measured.inputs,
                 executor,
                 unit=unit,
-                prior=prior,
+                commissioning=before,
+                drift=drift,
                 draws=draws,
                 error_draws=error_draws,
                 seed=settings.seed,

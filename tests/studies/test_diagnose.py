@@ -24,14 +24,14 @@ def test_fouling_and_low_outdoor_airflow_are_one_drop_of_the_condensers_conducta
     the fault's intensity is that conductance's drop, which either lowers, less than in
     proportion (ε-NTU)."""
     from pymc_vcc.physics.unit import load_unit
-    from pymc_vcc.studies.faults import condenser_conductance
+    from pymc_vcc.studies.faults import coil_conductance
 
     unit = load_unit()
     htc, flow = unit.parameters["HTC_CA"].nominal, unit.parameters["FO_FLOW"].nominal
     healthy = {"HTC_CA": np.array([htc] * 3), "FO_FLOW": np.array([flow] * 3)}
     faulty = {"HTC_CA": np.array([htc, 0.6 * htc, htc]),
               "FO_FLOW": np.array([flow, flow, 0.6 * flow])}  # fmt: skip
-    conductance = condenser_conductance(unit, healthy)
+    conductance = coil_conductance("condenser", unit, healthy)
     assert 100.0 < conductance[0] < 1e5 and np.ptp(conductance) == 0.0  # W/K
     fault = {f.name: f for f in FAULTS}["condenser fouling or low outdoor airflow"]
     drops = fault.intensity(faulty, healthy, unit)
@@ -97,8 +97,8 @@ def test_a_commissioning_posterior_without_the_moved_parameters_is_refused_in_on
     from pymc_vcc.studies.unit_log import later_prior
 
     with pytest.raises(ValueError, match=r"lacks \['FI_FLOW'\]; calibrate the healthy unit") as e:
-        later_prior(_posterior({"M0": [1.5] * 8, "HTC_CA": [40.0] * 8, "FO_FLOW": [1.0] * 8}),
-                    load_unit(), 0.03, 0)  # fmt: skip
+        draws = {"M0": 1.5, "HTC_CA": 40.0, "FO_FLOW": 1.0, "HTC_EA": 40.0}  # no FI_FLOW
+        later_prior(_posterior({pid: [v] * 8 for pid, v in draws.items()}), load_unit(), 0.03, 0)
     assert "\n" not in str(e.value)
 
 
@@ -229,3 +229,12 @@ def test_a_fault_probability_outside_zero_one_is_refused_before_any_work():
 
     with pytest.raises(ValueError, match=r"fault probability must lie in \(0, 1\), got 0.0"):
         diagnose(None, None, None, None, fault_probability=0.0)  # type: ignore[arg-type]
+
+
+def test_a_unit_heating_is_refused_in_one_line_before_any_work():
+    """The standard faults name the coils of a unit cooling (the condenser outdoors)."""
+    from pymc_vcc.physics.unit import HEAT_PUMP_UNIT, load_unit
+    from pymc_vcc.studies.diagnose import diagnose
+
+    with pytest.raises(ValueError, match=r"faults of a unit cooling .* is 'heat-pump-heating'"):
+        diagnose(None, None, None, None, unit=load_unit(HEAT_PUMP_UNIT))  # type: ignore[arg-type]
