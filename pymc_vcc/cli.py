@@ -445,8 +445,8 @@ def _add_record_options(parser: argparse.ArgumentParser) -> None:
         "--drift",
         type=float,
         default=0.03,
-        help="with --prior: sd of each nuisance parameter's change since commissioning, as a "
-        "fraction of its range (default 0.03)",
+        help="with --prior: sd of each parameter's change since commissioning, as a fraction "
+        "of its range, unless a fault moved it (default 0.03)",
     )
 
 
