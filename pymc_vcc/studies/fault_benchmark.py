@@ -15,7 +15,10 @@ each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A cas
   sure (two faults not distinguishable, or only possible ones);
 
 with the severity error (|posterior mean intensity − true intensity| / true intensity) and
-whether the 95 % interval of the intensity covers the truth.
+whether the 95 % interval of the intensity covers the truth. The leak alarm of ``pymc-vcc leak
+LOG --prior`` (the same prior and calibration: :func:`~pymc_vcc.studies.unit_log.leak_alarm`)
+is the undercharge's probability; its false alarms on the no-fault cases and its detection per
+charge loss are scored too.
 
 Every finished case is appended to ``<out>/checkpoints/validate-faults.jsonl`` (and every
 commissioning posterior kept beside it), so an interrupted run resumes where it stopped.
@@ -36,6 +39,7 @@ from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import diagnose
 from pymc_vcc.studies.faults import FAULTS
+from pymc_vcc.studies.real_units import ALARM_PROBABILITY
 from pymc_vcc.studies.record_budget import CHARGE
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
 from pymc_vcc.studies.unit_log import RECORD_BUDGETS, calibrate_record, record_budget_name
@@ -93,6 +97,9 @@ class FaultBenchmarkResult:
             f"{t['no_response_rate']:.2f}",
             f"severity error (median): {t['median_severity_error']:.2f} of the intensity; "
             f"intensity inside its 95 % interval: {t['intensity_coverage']:.2f}",
+            f"leak alarm (P(charge 10 % low) > {ALARM_PROBABILITY}): false alarms "
+            f"{t['leak_false_alarm_rate']:.2f} of the no-fault cases; detection "
+            + ", ".join(f"{rate:.2f} at a {size:.0%} loss" for size, rate in t["leak_detection"]),
             f"simulations per case: {t['simulations']:.0f}; s per case: {t['seconds']:.0f}",
             "",
             "fault                                     cases  correct  severity error  covered",
@@ -194,6 +201,14 @@ def summarise_cases(rows: Sequence[dict]) -> dict:
                 "severity_error": statistics.median(r["severity_error"] for r in mine),
                 "covered": statistics.fmean(r["covered"] for r in mine),
             }
+
+    def alarmed(row):
+        return row["probabilities"]["undercharge"] > ALARM_PROBABILITY
+
+    def loss(row):  # the case's charge loss, fraction (rounded: truths differ in the last digit)
+        return round(row["true_intensity"], 3)
+
+    leaks = [r for r in faulted if r["fault"] == "undercharge"]
     return {
         "cases": len(rows),
         "no_fault_cases": len(healthy),
@@ -208,6 +223,13 @@ def summarise_cases(rows: Sequence[dict]) -> dict:
         "intensity_coverage": (
             statistics.fmean(r["covered"] for r in faulted) if faulted else float("nan")
         ),
+        "leak_false_alarm_rate": (
+            statistics.fmean(alarmed(r) for r in healthy) if healthy else float("nan")
+        ),
+        "leak_detection": [
+            (size, statistics.fmean(alarmed(r) for r in leaks if loss(r) == size))
+            for size in sorted({loss(r) for r in leaks})
+        ],
         "simulations": statistics.fmean(r["simulations"] for r in rows),
         "seconds": statistics.median(r["seconds"] for r in rows),
         "by_fault": by_fault,

@@ -164,6 +164,17 @@ def test_score_table_counts_rates_among_healthy_and_faulted_cases():
         {"fault": gas, "score": "missed detection", "severity_error": 0.5, "covered": False,
          "simulations": 200, "seconds": 5.0},
     ]  # fmt: skip
+    for row, p_leak in zip(rows, [0.6, 0.1, 0.0, 0.0], strict=True):
+        row |= {"true_intensity": 0.0, "probabilities": {"undercharge": p_leak}}
+    leaks = [  # the leak alarm: the undercharge's probability above 0.5, per loss
+        {"fault": "undercharge", "score": "correct diagnosis", "severity_error": 0.1,
+         "covered": True, "simulations": 200, "seconds": 3.0, "true_intensity": loss,
+         "probabilities": {"undercharge": p}}
+        for loss, p in ((0.19999999999999996, 0.99), (0.20000000000000007, 0.4), (0.3, 1.0))
+    ]  # fmt: skip
+    with_leaks = summarise_cases(rows + leaks)
+    assert with_leaks["leak_false_alarm_rate"] == 0.5
+    assert with_leaks["leak_detection"] == [(0.2, 0.5), (0.3, 1.0)]
     table = summarise_cases(rows)
     assert table["false_alarm_rate"] == 0.5 and table["correct_rate"] == 0.5
     assert table["missed_rate"] == 0.5 and table["misdiagnosis_rate"] == 0.0
