@@ -99,7 +99,7 @@ class FaultBenchmarkResult:
             f"intensity inside its 95 % interval: {t['intensity_coverage']:.2f}",
             f"leak alarm (P(charge 10 % low) > {ALARM_PROBABILITY}): false alarms "
             f"{t['leak_false_alarm_rate']:.2f} of the no-fault cases; detection "
-            + ", ".join(f"{rate:.2f} at a {size:.0%} loss" for size, rate in t["leak_detection"]),
+            + ", ".join(f"{p:.2f} at a {100 * loss:.0f} % loss" for loss, p in t["leak_detection"]),
             f"simulations per case: {t['simulations']:.0f}; s per case: {t['seconds']:.0f}",
             "",
             "fault                                     cases  correct  severity error  covered",
