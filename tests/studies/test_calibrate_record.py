@@ -46,3 +46,14 @@ def test_the_models_own_data_is_calibrated_without_a_coil_offset(truth, method):
     assert int(stats["n_simulations"]) == sampled + 2 * 12 + predictive
     charge = tree["posterior"]["M0"]
     assert 0.9 <= float(charge.min()) < float(charge.max()) <= 2.2  # accuracy: the benchmark
+
+
+def test_a_later_record_takes_a_prior_or_a_commissioning_posterior_not_both():
+    import xarray as xr
+
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.unit_log import box_prior, calibrate_record
+
+    prior = box_prior(load_unit(), ["M0"])
+    with pytest.raises(ValueError, match="a prior or a commissioning posterior, not both"):
+        calibrate_record(None, None, None, prior=prior, commissioning=xr.DataTree())  # type: ignore[arg-type]
