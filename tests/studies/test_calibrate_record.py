@@ -52,7 +52,7 @@ def test_a_later_record_takes_a_prior_or_a_commissioning_posterior_not_both():
     import xarray as xr
 
     from pymc_vcc.physics.unit import load_unit
-    from pymc_vcc.studies.unit_log import box_prior, calibrate_record
+    from pymc_vcc.studies.unit_log import box_prior
 
     prior = box_prior(load_unit(), ["M0"])
     with pytest.raises(ValueError, match="a prior or a commissioning posterior, not both"):
