@@ -29,6 +29,7 @@ from matplotlib.figure import Figure
 
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.error_model import SensorAccuracy, plateau_windows, summarise
+from pymc_vcc.physics.cycles.split_cooling import SplitCooling
 from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
@@ -49,7 +50,6 @@ from pymc_vcc.studies.unit_log import (
 
 NAMED = 0.9  # a fault is named when P(intensity beyond its threshold) is at least this
 POSSIBLE = 0.5  # below NAMED and at least this: reported as possible
-COOLING = "split-cooling"  # the cycle whose coils the standard faults name
 
 
 @dataclass
@@ -264,10 +264,10 @@ def diagnose(
     unit = load_unit() if unit is None else unit
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
-    if unit.cycle != COOLING:
+    if unit.cycle != SplitCooling.name:  # the standard faults name the cooling mode's coils
         raise ValueError(
-            f"the diagnosis knows the faults of a unit cooling ({COOLING!r}); this unit's cycle "
-            f"is {unit.cycle!r}"
+            f"the diagnosis knows the faults of a unit cooling ({SplitCooling.name!r}); this "
+            f"unit's cycle is {unit.cycle!r}"
         )
     accuracy = SensorAccuracy() if accuracy is None else accuracy
     posterior = commissioning["posterior"]

@@ -39,10 +39,14 @@ from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import diagnose
 from pymc_vcc.studies.faults import FAULTS
-from pymc_vcc.studies.real_units import ALARM_PROBABILITY
 from pymc_vcc.studies.record_budget import CHARGE
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
-from pymc_vcc.studies.unit_log import RECORD_BUDGETS, calibrate_record, record_budget_name
+from pymc_vcc.studies.unit_log import (
+    ALARM_PROBABILITY,
+    RECORD_BUDGETS,
+    calibrate_record,
+    record_budget_name,
+)
 
 Case = tuple[str | None, dict[str, float]]
 """A later record: its fault (None: none) and the changes that make it, id -> a fraction of

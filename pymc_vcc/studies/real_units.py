@@ -31,6 +31,8 @@ from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.truths import VARIANTS, generate_truth
 from pymc_vcc.studies.unit_log import (
+    ALARM_FRACTION,
+    ALARM_PROBABILITY,
     RECORD_BUDGETS,
     calibrate_record,
     charge_summary,
@@ -41,8 +43,6 @@ from pymc_vcc.studies.unit_log import (
 )
 
 LOSS = 0.2  # the leak the alarm must detect, a fraction of the commissioned charge
-ALARM_FRACTION = 0.9  # the alarm: P(charge <= 0.9 × commissioned)
-ALARM_PROBABILITY = 0.5  # the alarm sounds above this posterior probability
 RUNS_CHECKPOINT = "validate-real-units"  # <out>/checkpoints/validate-real-units.jsonl
 
 

@@ -497,6 +497,10 @@ def later_prior(
     return spike.with_slabs(list(dict.fromkeys(fault.parameters for fault in FAULTS)), probability)
 
 
+ALARM_FRACTION = 0.9  # the leak alarm: P(charge <= 0.9 × commissioned)
+ALARM_PROBABILITY = 0.5  # the alarm sounds above this posterior probability
+
+
 def leak_alarm(
     later: xr.DataTree, commissioning: xr.DataTree, unit: Unit, fraction: float, seed: int
 ) -> float:
@@ -527,7 +531,7 @@ def record_study(
     unit: Unit | None = None,
     commissioning: str | None = None,
     drift: float = 0.03,
-    alarm_fraction: float = 0.9,
+    alarm_fraction: float = ALARM_FRACTION,
     rounds: int = 1,
     coils: str = "finer",
     method: str = "likelihood",

@@ -10,9 +10,9 @@ the cycle's mode (``[condenser]``, ``[evaporator]``) and the fans by where they 
 (:data:`OUTPUTS`), and the same three faults (:data:`FAULTS`: a liquid-line restriction,
 non-condensable gas in the condenser, leaking compressor valves). :func:`split_unit_constants`
 turns a unit, a Table III vector and a fault vector into one record whose fields the cycle
-modules read by name. The
-kernels both modes share (suction tank outlet, compressor flow through the lumped pressure
-drops, a coil cell's wall heat, the start-up fill profile) are here too.
+modules read by name. The kernels both modes share (suction tank outlet, compressor flow
+through the lumped pressure drops, a coil cell's wall heat, the start-up fill profile) are here
+too.
 """
 
 from __future__ import annotations
