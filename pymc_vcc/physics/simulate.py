@@ -20,7 +20,6 @@ import numpy as np
 import xarray as xr
 from threadpoolctl import ThreadpoolController
 
-from pymc_vcc.physics.cycles.base import CycleModel
 from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.inputs import (
     builtin_inputs,
@@ -30,7 +29,7 @@ from pymc_vcc.physics.inputs import (
     with_settling,
 )
 from pymc_vcc.physics.integration.callbacks import BoundCycle
-from pymc_vcc.physics.integration.segments import make_solver
+from pymc_vcc.physics.integration.segments import Counters, make_solver
 from pymc_vcc.physics.integration.solver import Solver, get_solver
 from pymc_vcc.physics.integration.warmup import ensure_compiled
 from pymc_vcc.physics.unit import Unit, load_unit
@@ -60,11 +59,6 @@ threading (five times slower at 126 states on a busy 2-core machine), and sample
 simulation per core anyway. CVODE does not call BLAS, and is not wrapped: setting OpenBLAS's
 threads back after each run woke its threads in a forked worker, where they spun (a CVODE run
 took 2.3 times its wall time in CPU)."""
-
-
-def _empty_result(model: CycleModel, times: np.ndarray, diagnostics: bool) -> dict:
-    names = model.outputs.ids if diagnostics else model.outputs.output_ids
-    return {name: np.full(times.size, np.nan) for name in names}
 
 
 def simulate(
@@ -120,124 +114,143 @@ def simulate(
         ``n_jac``, ``n_steps``, ``wall_time`` (s), ``mass_error`` (max ``|M - M0| / M0``
         on the grid), ``source_integral`` (∫|ṁ_src| dt, kg).
     """
-    unit = _builtin_unit() if unit is None else unit
-    ensure_compiled(unit)  # before the wall clock starts: compiling is not simulating
-    model = unit.cycle_model
-    inputs = builtin_inputs() if inputs is None else inputs
-    validate_inputs(inputs, model.inputs)
-    if t_end is not None:
-        inputs = window(inputs, float(t_end))
-    theta, faults = unit.parameter_vectors(params)
-    dt = float(output_interval)
-    if not dt > 0:
-        raise ValueError(f"output_interval must be positive, got {dt}")
-    limit = float(max_wall_time)
-    solver = get_solver(solver)
+    simulation = Simulation(
+        unit,
+        inputs,
+        t_end=t_end,
+        output_interval=output_interval,
+        controller=controller,
+        diagnostics=diagnostics,
+        max_wall_time=max_wall_time,
+        solver=solver,
+    )
+    return simulation.run(params, states=states)
 
-    started = time.perf_counter()
-    edges, held = input_segments(inputs, model.inputs)
-    times = np.arange(0.0, edges[-1] + 1e-9 * edges[-1], dt)
-    tables = _fluid(unit.refrigerant).tables
-    n = unit.discretisation.n_volumes
-    layout = model.layout(n)
-    c = model.constants(unit, theta, controller, faults)
-    atol = layout.tolerances(solver)
 
-    on_grid = np.full((times.size, layout.size), np.nan)
-    controls = np.empty((times.size, len(model.inputs)))
-    segment_of = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(held) - 1)
-    controls[:] = held[segment_of]
-    stepper = make_solver(solver, atol, limit)
-    failure: Failure | None = None
-    try:
-        y = model.initial_state(c, n, held[0], tables)
-    except Exception as error:  # any numerical trouble is a failed run, never an exception
-        y = None
-        failure = Failure(FailureKind.INITIAL_STATE, f"initial state: {error}")
-    if y is not None:
-        blas = (
-            _THREADPOOLS.limit(limits=1, user_api="blas")
-            if stepper.calls_blas
-            else contextlib.nullcontext()
+class Simulation:
+    """A unit over an input profile on an output grid with a solver, ready to run for any
+    parameters (the arguments of :func:`simulate`, which runs one). What a sampler's draws
+    share is prepared once: the checked inputs, their segments, the grid, the state layout,
+    the kernels bound to their argument types and the solver's memory; a run computes the
+    constants, the initial state, the integration and the outputs."""
+
+    def __init__(
+        self,
+        unit: Unit | None = None,
+        inputs: xr.Dataset | None = None,
+        *,
+        t_end: float | None = None,
+        output_interval: float = OUTPUT_INTERVAL,
+        controller: bool | None = None,
+        diagnostics: bool = False,
+        max_wall_time: float = MAX_WALL_TIME,
+        solver: str | Solver | None = None,
+    ) -> None:
+        unit = _builtin_unit() if unit is None else unit
+        ensure_compiled(unit)  # before any wall clock starts: compiling is not simulating
+        model = unit.cycle_model
+        inputs = builtin_inputs() if inputs is None else inputs
+        validate_inputs(inputs, model.inputs)
+        if t_end is not None:
+            inputs = window(inputs, float(t_end))
+        dt = float(output_interval)
+        if not dt > 0:
+            raise ValueError(f"output_interval must be positive, got {dt}")
+        self.unit, self.model, self.controller = unit, model, controller
+        self.diagnostics = diagnostics
+        self.limit = float(max_wall_time)
+        self.solver = get_solver(solver)
+        self.edges, self.held = input_segments(inputs, model.inputs)
+        self.times = np.arange(0.0, self.edges[-1] + 1e-9 * self.edges[-1], dt)
+        self.times.flags.writeable = False  # every run's Datasets share it
+        segment_of = np.searchsorted(self.edges, self.times, side="right") - 1
+        self.controls = self.held[np.clip(segment_of, 0, len(self.held) - 1)]
+        self.tables = _fluid(unit.refrigerant).tables
+        self.layout = model.layout(unit.discretisation.n_volumes)
+        self.stepper = make_solver(self.solver, self.layout.tolerances(self.solver), self.limit)
+        # the kernels read the constants through this array: each run writes its own into it
+        theta, faults = unit.parameter_vectors(None)
+        self.c = model.constants(unit, theta, controller, faults)
+        y = np.zeros(self.layout.size)
+        self.cycle = BoundCycle(model, y, self.held[0], self.c, self.tables)
+        info = model.outputs.info
+        names = model.outputs.ids if diagnostics else model.outputs.output_ids
+        self.template = xr.Dataset(  # each run's outputs are a copy with its own data
+            {
+                name: ("time", self.times, {"units": info[name][1], "long_name": info[name][0]})
+                for name in names
+            },
+            coords={"time": ("time", self.times, {"units": "s"})},
         )
-        with blas:
-            failure = _integrate(
-                model, y, c, tables, edges, held, times, on_grid, stepper, started + limit
-            )
 
-    values = _empty_result(model, times, diagnostics)
-    done = np.isfinite(on_grid).all(axis=1)
-    charge = model.charge(c)
-    if done.any():
+    def run(self, params: Mapping[str, float] | None = None, *, states: bool = False) -> xr.Dataset:
+        """Simulate with ``params`` (id -> value; missing ids nominal, faults 0) and return the
+        outputs as :func:`simulate` does (``states``: the solver's state on the grid too)."""
+        unit, model, times, tables = self.unit, self.model, self.times, self.tables
+        theta, faults = unit.parameter_vectors(params)
+        started = time.perf_counter()
+        self.c[:] = model.constants(unit, theta, self.controller, faults)
+        c = self.c
+        stepper = self.stepper
+        stepper.counters = Counters()
+        on_grid = np.full((times.size, self.layout.size), np.nan)
+        failure: Failure | None = None
+        try:
+            y = model.initial_state(c, unit.discretisation.n_volumes, self.held[0], tables)
+        except Exception as error:  # any numerical trouble is a failed run, never an exception
+            y = None
+            failure = Failure(FailureKind.INITIAL_STATE, f"initial state: {error}")
+        if y is not None:
+            blas = (
+                _THREADPOOLS.limit(limits=1, user_api="blas")
+                if stepper.calls_blas
+                else contextlib.nullcontext()
+            )
+            with blas:
+                failure = stepper.integrate_segments(
+                    self.cycle, y, self.edges, self.held, times, on_grid, started + self.limit
+                )
+
+        names = list(self.template.data_vars)
+        done = np.isfinite(on_grid).all(axis=1)
         evaluated = np.full((times.size, model.n_eval), np.nan)
-        evaluated[done] = model.outputs_along(on_grid[done], controls[done], c, tables, diagnostics)
-        for k, name in enumerate(values):
-            values[name] = evaluated[:, k]
-        at = model.outputs.offsets
-        mass = evaluated[done, at.M]
-        source = evaluated[done, at.mdot_src]
-        mass_error = float(np.max(np.abs(mass - charge)) / charge)
-        source_integral = float(np.trapezoid(np.abs(source), times[done]))
-    else:
-        mass_error = float("nan")
-        source_integral = float("nan")
-    if failure is None and not np.isfinite(np.column_stack(list(values.values()))).all():
-        failure = Failure(FailureKind.NON_FINITE, "non-finite outputs")
-    info = model.outputs.info
-    dataset = xr.Dataset(
-        {
-            name: ("time", data, {"units": info[name][1], "long_name": info[name][0]})
-            for name, data in values.items()
-        },
-        coords={"time": ("time", times, {"units": "s"})},
-        attrs={
+        mass_error = source_integral = float("nan")
+        if done.any():
+            evaluated[done] = model.outputs_along(
+                on_grid[done], self.controls[done], c, tables, self.diagnostics
+            )
+            charge = model.charge(c)
+            at = model.outputs.offsets
+            mass_error = float(np.max(np.abs(evaluated[done, at.M] - charge)) / charge)
+            source = np.abs(evaluated[done, at.mdot_src])
+            source_integral = float(np.trapezoid(source, times[done]))
+        values = evaluated[:, : len(names)]
+        if failure is None and not np.isfinite(values).all():
+            failure = Failure(FailureKind.NON_FINITE, "non-finite outputs")
+        data = {name: values[:, k] for k, name in enumerate(names)}
+        dataset = self.template.copy(deep=False, data=data)
+        dataset.attrs = {
             "status": "failed" if failure else "ok",
             "failure_kind": failure.kind.value if failure else "",
             "failure_reason": failure.detail if failure else "",
             "n_rhs": stepper.counters.n_rhs,
             "n_jac": stepper.counters.n_jac,
             "n_steps": stepper.counters.n_steps,
-            "solver": str(solver),
-            "n_states": layout.size,
+            "solver": str(self.solver),
+            "n_states": self.layout.size,
             "wall_time": time.perf_counter() - started,
             "mass_error": mass_error,
             "source_integral": source_integral,
             "unit": unit.name,
             "cycle": model.name,
-        },
-    )
-    if states:
-        dataset["states"] = (("time", "state"), on_grid, {"long_name": "solver state"})
-        dataset = dataset.assign_coords(
-            state=("state", list(layout.labels)), state_units=("state", list(layout.units))
-        )
-    return dataset
-
-
-def _integrate(model, y, c, tables, edges, held, times, states, solver, deadline):
-    """Fill ``states`` on ``times`` segment by segment; return the :class:`Failure` or None."""
-    dydt = np.empty(y.size)
-    cycle = BoundCycle(model, y, held[0], c, tables)
-    for k, u in enumerate(held):
-        t0, t1 = float(edges[k]), float(edges[k + 1])
-        last = k == len(held) - 1
-        cycle.u[:] = u
-        in_segment = (times >= t0) & ((times < t1) | (last & (times <= t1)))
-        pending = np.flatnonzero(in_segment)
-        if pending.size and times[pending[0]] == t0:
-            states[pending[0]] = y
-            pending = pending[1:]
-        if not cycle.rhs(y, dydt):
-            return Failure(
-                FailureKind.PROPERTY_RANGE,
-                f"right-hand side not finite at t = {t0:.1f} s (property out of range)",
+        }
+        if states:
+            dataset["states"] = (("time", "state"), on_grid, {"long_name": "solver state"})
+            dataset = dataset.assign_coords(
+                state=("state", list(self.layout.labels)),
+                state_units=("state", list(self.layout.units)),
             )
-        filled = np.full((pending.size, y.size), np.nan)
-        y, failure = solver.integrate(cycle, y, t0, t1, times[pending], filled, deadline)
-        states[pending] = filled
-        if failure is not None:
-            return failure
-    return None
+        return dataset
 
 
 class VCCSimulator:
@@ -339,6 +352,10 @@ class VCCSimulator:
         self.solver = get_solver(solver)
         self.allow_outside_unit_bounds = allow_outside_unit_bounds
         ensure_compiled(self.unit)
+        self._simulation: Simulation | None = None  # prepared at the first run
+
+    def __getstate__(self) -> dict:
+        return self.__dict__ | {"_simulation": None}  # the solver's memory stays in its process
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
@@ -367,18 +384,20 @@ class VCCSimulator:
         self, theta: Mapping[str, float], rng: np.random.Generator | None = None
     ) -> xr.Dataset:
         """Simulate with parameters ``theta`` (id -> value) and return the selected outputs."""
-        result = simulate(
-            self.unit,
-            {**self.fixed, **theta},
-            self._run_inputs,
-            controller=self.controller,
-            max_wall_time=self.max_wall_time,
-            solver=self.solver,
-            diagnostics=any(
-                name in self.unit.cycle_model.outputs.optional_ids for name in self.output_names
-            ),
-        )
-        result = result[list(self.output_names)]
+        if self._simulation is None:
+            self._simulation = Simulation(
+                self.unit,
+                self._run_inputs,
+                controller=self.controller,
+                max_wall_time=self.max_wall_time,
+                solver=self.solver,
+                diagnostics=any(
+                    name in self.unit.cycle_model.outputs.optional_ids for name in self.output_names
+                ),
+            )
+        result = self._simulation.run({**self.fixed, **theta})
+        if len(self.output_names) < len(result.data_vars):
+            result = result[list(self.output_names)]
         start = self.t_window[0] + self.settle
         if start <= 0.0:  # the whole run (selecting it anyway took 0.25 ms)
             return result

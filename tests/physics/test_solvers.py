@@ -69,6 +69,7 @@ class Linear:
     def __init__(self, limit=np.inf):
         self.data = np.append(A.ravel(), limit)
         self.bad_rhs = 0
+        self.u = np.zeros(0)  # no inputs
 
     def rhs(self, y, dydt):
         return _linear(A, self.data[9], y, dydt)

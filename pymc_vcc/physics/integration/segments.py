@@ -43,6 +43,9 @@ tolerances 11 %."""
 class SegmentModel(Protocol):
     """The right-hand side of one input segment, as Python callables and as C callbacks."""
 
+    u: np.ndarray
+    """The inputs the right-hand side reads: each segment's are written here."""
+
     def rhs(self, y: np.ndarray, dydt: np.ndarray) -> bool:
         """Write f(y) into ``dydt``; return False when it is not finite."""
         ...
@@ -102,6 +105,22 @@ class SegmentSolver(Protocol):
         ``deadline`` is a ``time.perf_counter()`` value."""
         ...
 
+    def integrate_segments(
+        self,
+        model: SegmentModel,
+        y0: np.ndarray,
+        edges: np.ndarray,
+        held: np.ndarray,
+        times: np.ndarray,
+        states: np.ndarray,
+        deadline: float,
+    ) -> Failure | None:
+        """Integrate from ``y0`` at ``edges[0]`` through the segments between ``edges`` (s),
+        each under its row of inputs ``held`` (written into ``model.u``), restarting at each;
+        write the state at each of ``times`` (sorted, in ``[edges[0], edges[-1]]``) into its row
+        of ``states``. Return None or the :class:`Failure`; rows not reached stay untouched."""
+        ...
+
 
 def make_solver(solver: Solver, atol: np.ndarray, wall_limit: float) -> SegmentSolver:
     """A fresh segment solver running ``solver``, with the absolute tolerance of each state
@@ -124,6 +143,27 @@ class RadauSolver:
     def __init__(self, rtol: float, atol: np.ndarray, max_step: float, wall_limit: float):
         self.rtol, self.atol, self.max_step, self.wall_limit = rtol, atol, max_step, wall_limit
         self.counters = Counters()
+
+    def integrate_segments(self, model, y0, edges, held, times, states, deadline):
+        y = y0
+        dydt = np.empty(y.size)
+        for k, u in enumerate(held):
+            t0, t1 = float(edges[k]), float(edges[k + 1])
+            last = k == len(held) - 1
+            model.u[:] = u
+            in_segment = (times >= t0) & ((times < t1) | (last & (times <= t1)))
+            pending = np.flatnonzero(in_segment)
+            if pending.size and times[pending[0]] == t0:
+                states[pending[0]] = y
+                pending = pending[1:]
+            if not model.rhs(y, dydt):
+                return _property_range_failure(t0)
+            filled = np.full((pending.size, y.size), np.nan)
+            y, failure = self.integrate(model, y, t0, t1, times[pending], filled, deadline)
+            states[pending] = filled
+            if failure is not None:
+                return failure
+        return None
 
     def integrate(self, model, y0, t0, t1, t_out, states_out, deadline):
         counters, limit = self.counters, self.wall_limit
@@ -185,6 +225,14 @@ class RadauSolver:
         return solver.y, None
 
 
+def _property_range_failure(t: float) -> Failure:
+    """A right-hand side not finite at the start ``t`` (s) of a segment."""
+    return Failure(
+        FailureKind.PROPERTY_RANGE,
+        f"right-hand side not finite at t = {t:.1f} s (property out of range)",
+    )
+
+
 def _failure(t: float, message: str, bad_rhs: int) -> Failure:
     """A solver failure at ``t`` (s), naming the right-hand sides that were not finite."""
     if bad_rhs:
@@ -223,9 +271,9 @@ class CvodeSolver:
 
     One CVODE instance serves every segment of a model (re-initialised at each segment's start,
     which stops it at the segment's end); the outputs come from CVODE's own interpolation in normal
-    mode, so it never stops at them; a compiled loop calls CVODE for the output times (see
-    :meth:`.sundials.Cvode.advance_through`), and the wall clock is read between its chunks of
-    output times; the states are checked finite once per segment.
+    mode, so it never stops at them. One compiled loop runs every segment: it writes the
+    segment's inputs, restarts CVODE, calls it for each output time and checks the state finite
+    (:meth:`.sundials.Cvode.run`); Python reads the wall clock between its chunks of stops.
     """
 
     calls_blas = False  # SUNDIALS' own dense LU
@@ -244,34 +292,39 @@ class CvodeSolver:
         self._cvode: sundials.Cvode | None = None
         self._model: SegmentModel | None = None
 
-    def integrate(self, model, y0, t0, t1, t_out, states_out, deadline):
-        if self._cvode is None or model is not self._model:  # CVODE holds the model's callbacks
+    def _instance(self, model: SegmentModel) -> sundials.Cvode:
+        """The CVODE instance for ``model`` (one holds the model's callbacks)."""
+        if self._cvode is None or model is not self._model:
             self._model = model
             rtol, atol, max_step = self._settings
             self._cvode = sundials.Cvode(model.c_callbacks(), atol.size, rtol, atol)
             self._cvode.configure(CVODE_MAX_ORDER, self.MAX_STEPS, self.MIN_STEP, max_step)
-        cvode = self._cvode
-        cvode.restart(t0, y0, t1)
-        ends_on_output = t_out.size > 0 and t_out[-1] == t1
-        targets = t_out if ends_on_output else np.append(t_out, t1)
-        failure = None
-        done, flag, late = cvode.advance_through(targets, states_out, deadline)
-        if late:
-            failure = _wall_clock_failure(self.wall_limit, cvode.t)
-        elif flag < 0:
-            failure = _failure(cvode.t, sundials.flag_name(flag), model.bad_rhs)
-        finite = np.isfinite(states_out[: min(done, t_out.size)]).all(axis=1)
-        if not finite.all():  # the first non-finite state ends the run there
-            first = int(np.argmin(finite))
-            states_out[first:] = np.nan
-            failure = Failure(
-                FailureKind.NON_FINITE, f"non-finite state at t = {t_out[first]:.2f} s"
-            )
-        elif failure is None and not np.isfinite(cvode.y).all():
-            failure = Failure(FailureKind.NON_FINITE, f"non-finite state at t = {cvode.t:.2f} s")
+        return self._cvode
+
+    def integrate_segments(self, model, y0, edges, held, times, states, deadline):
+        cvode = self._instance(model)
+        plan = sundials.stop_plan(edges, held, times, model.u)
+        done, flag, finite, late = cvode.run(y0, plan, states, deadline)
         n_steps, n_rhs, n_jac = cvode.statistics()
         self.counters.n_steps += n_steps
         self.counters.n_rhs += n_rhs
         self.counters.n_jac += n_jac
         self.counters.bad_rhs = model.bad_rhs
-        return cvode.y.copy(), failure
+        if late:
+            return _wall_clock_failure(self.wall_limit, cvode.t)
+        if flag == sundials.CV_FIRST_RHSFUNC_ERR:
+            return _property_range_failure(cvode.t)
+        if flag < 0:
+            return _failure(cvode.t, sundials.flag_name(flag), model.bad_rhs)
+        if not finite:
+            return Failure(
+                FailureKind.NON_FINITE, f"non-finite state at t = {plan.times[done]:.2f} s"
+            )
+        return None
+
+    def integrate(self, model, y0, t0, t1, t_out, states_out, deadline):
+        edges = np.array([t0, t1])
+        failure = self.integrate_segments(
+            model, y0, edges, model.u[None], t_out, states_out, deadline
+        )
+        return self._instance(model).y.copy(), failure

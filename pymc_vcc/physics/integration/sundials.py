@@ -3,7 +3,8 @@
 scikit-sundae's wheel carries the SUNDIALS 7.9 shared libraries; scikit-sundae itself calls the
 right-hand side and Jacobian through Python (~13 µs a call on top of the model's 20-34 µs, from
 the difference of whole runs). Here CVODE calls C callbacks compiled by Numba directly, and its
-whole step loop runs in machine code; Python only asks for each output time.
+whole step loop runs in machine code, and so does the loop over the input segments and the
+output times (:meth:`Cvode.run`); Python only reads the wall clock between its chunks.
 
 The layouts below are those of that build (``sunindextype`` a 32-bit int, ``sunrealtype``
 double): an ``N_Vector`` and a ``SUNMatrix`` start with a pointer to their content; a serial
@@ -21,7 +22,9 @@ import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
+from typing import NamedTuple
 
+import numba
 import numpy as np
 from llvmlite import ir
 from numba import carray, njit, types
@@ -30,6 +33,7 @@ from numba.extending import intrinsic
 
 CV_BDF = 2
 CV_NORMAL = 1
+CV_FIRST_RHSFUNC_ERR = -9
 
 RHS_SIGNATURE = types.int32(types.float64, types.voidptr, types.voidptr, types.voidptr)
 """``int f(t, N_Vector y, N_Vector ydot, void *user_data)``: 0 ok, 1 recoverable error."""
@@ -152,6 +156,21 @@ def dense_matrix_data(matrix, n):
     return carray(_content_pointer(matrix, 1), (n, n), np.float64)
 
 
+def _pointers(builder, values):
+    """The int64 ``values`` as ``void*``."""
+    return [builder.inttoptr(value, cgutils.voidptr_t) for value in values]
+
+
+def _call(builder, function, result, arguments, values):
+    """Call the C function at address ``function`` (int64) of LLVM type ``result(*arguments)``."""
+    function_type = ir.FunctionType(result, arguments)
+    return builder.call(builder.inttoptr(function, function_type.as_pointer()), values)
+
+
+_POINTER = cgutils.voidptr_t
+_INT = ir.IntType(32)
+
+
 @intrinsic
 def _call_cvode(typingctx, function, memory, target, vector, reached):
     """``CVode(memory, target, vector, reached, CV_NORMAL)`` through its address ``function``
@@ -159,54 +178,157 @@ def _call_cvode(typingctx, function, memory, target, vector, reached):
 
     def codegen(context, builder, signature, args):
         function, memory, target, vector, reached = args
-        pointer = cgutils.voidptr_t
-        cvode_type = ir.FunctionType(
-            ir.IntType(32), [pointer, ir.DoubleType(), pointer, pointer, ir.IntType(32)]
-        )
-        cvode = builder.inttoptr(function, cvode_type.as_pointer())
-        return builder.call(
-            cvode,
-            [
-                builder.inttoptr(memory, pointer),
-                target,
-                builder.inttoptr(vector, pointer),
-                builder.inttoptr(reached, pointer),
-                ir.Constant(ir.IntType(32), CV_NORMAL),
-            ],
-        )
+        memory, vector, reached = _pointers(builder, (memory, vector, reached))
+        normal = ir.Constant(_INT, CV_NORMAL)
+        arguments = [_POINTER, ir.DoubleType(), _POINTER, _POINTER, _INT]
+        return _call(builder, function, _INT, arguments, [memory, target, vector, reached, normal])
 
     return types.int32(types.int64, types.int64, types.float64, types.int64, types.int64), codegen
 
 
+@intrinsic
+def _call_pointer_time(typingctx, function, memory, t):
+    """``function(memory, t)`` (``CVodeSetStopTime``) through its address."""
+
+    def codegen(context, builder, signature, args):
+        function, memory, t = args
+        (memory,) = _pointers(builder, (memory,))
+        return _call(builder, function, _INT, [_POINTER, ir.DoubleType()], [memory, t])
+
+    return types.int32(types.int64, types.int64, types.float64), codegen
+
+
+@intrinsic
+def _call_pointer_time_pointer(typingctx, function, memory, t, vector):
+    """``function(memory, t, vector)`` (``CVodeReInit``) through its address."""
+
+    def codegen(context, builder, signature, args):
+        function, memory, t, vector = args
+        memory, vector = _pointers(builder, (memory, vector))
+        arguments = [_POINTER, ir.DoubleType(), _POINTER]
+        return _call(builder, function, _INT, arguments, [memory, t, vector])
+
+    return types.int32(types.int64, types.int64, types.float64, types.int64), codegen
+
+
+@intrinsic
+def _call_pointer_pointer(typingctx, function, memory, value):
+    """``function(memory, value)`` (a ``CVodeGetNum...`` counter) through its address."""
+
+    def codegen(context, builder, signature, args):
+        function, memory, value = args
+        values = _pointers(builder, (memory, value))
+        return _call(builder, function, _INT, [_POINTER, _POINTER], values)
+
+    return types.int32(types.int64, types.int64, types.int64), codegen
+
+
+COUNTERS = ("CVodeGetNumSteps", "CVodeGetNumRhsEvals", "CVodeGetNumJacEvals")
+"""CVODE's counts of steps, right-hand sides and Jacobians since its last restart."""
+
+FUNCTIONS = ("CVode", "CVodeReInit", "CVodeSetStopTime", *COUNTERS)
+"""The SUNDIALS functions the compiled loop calls, in the order of its ``functions``."""
+
+
 @njit(cache=True)
-def _advance(function, memory, vector, reached, targets, first, last, out):
-    """Call CVODE for ``targets[first:last]`` in turn, the state at each target whose index is
-    a row of ``out`` copied there; returns (the first target not reached, CVODE's last flag)."""
+def _add_counts(functions, memory, counts, totals):
+    """Add CVODE's step, right-hand side and Jacobian counts since its last restart to
+    ``totals`` (``counts``: scratch space for three)."""
+    for k in range(3):
+        _call_pointer_pointer(functions[3 + k], memory, counts.ctypes.data + 8 * k)
+        totals[k] += counts[k]
+
+
+class StopPlan(NamedTuple):
+    """Where CVODE stops over a piecewise-constant input profile (:func:`stop_plan`)."""
+
+    times: np.ndarray
+    """Every stop in order, s: the output times and the end of each segment."""
+    rows: np.ndarray
+    """The output row of each stop; -1 for a segment's end that is no output time."""
+    starts: np.ndarray
+    """The segment each stop is the first of; -1 for the others."""
+    held: np.ndarray
+    """Each segment's inputs, a row each."""
+    edges: np.ndarray
+    """The segments' bounds, s (one more than segments)."""
+    start_rows: np.ndarray
+    """The output row at each segment's start time; -1 where none falls there."""
+    u: np.ndarray
+    """The inputs the right-hand side reads (the compiled loop writes each segment's there)."""
+
+
+def stop_plan(edges: np.ndarray, held: np.ndarray, times: np.ndarray, u: np.ndarray) -> StopPlan:
+    """The :class:`StopPlan` of segments ``edges`` (s) holding inputs ``held`` and output
+    ``times`` (s, sorted, from ``edges[0]`` to ``edges[-1]``): an output time on a segment's
+    start is that segment's (the last segment also takes its end)."""
+    stops, rows, starts, start_rows = [], [], [], []
+    last = len(held) - 1
+    for k in range(len(held)):
+        t0, t1 = edges[k], edges[k + 1]
+        lo = int(np.searchsorted(times, t0, side="left"))
+        hi = int(np.searchsorted(times, t1, side="right" if k == last else "left"))
+        at_start = lo < hi and times[lo] == t0
+        start_rows.append(lo if at_start else -1)
+        inside = np.arange(lo + at_start, hi)
+        if not inside.size or times[inside[-1]] != t1:
+            inside = np.append(inside, -1)  # the segment's end, no output time
+        starts += [k] + [-1] * (inside.size - 1)
+        rows.append(inside)
+        stops.append(np.where(inside >= 0, times[np.maximum(inside, 0)], t1))
+    return StopPlan(
+        np.concatenate(stops),
+        np.concatenate(rows).astype(np.int64),
+        np.array(starts, dtype=np.int64),
+        np.ascontiguousarray(held, dtype=np.float64),
+        np.ascontiguousarray(edges, dtype=np.float64),
+        np.array(start_rows, dtype=np.int64),
+        u,
+    )
+
+
+@njit(cache=True)
+def _advance(functions, memory, vector, reached, plan, first, last, out, counts, totals):
+    """Call CVODE for stops ``first`` to ``last - 1`` of the :class:`StopPlan` ``plan`` in turn:
+    at a segment's first stop write its inputs into ``plan.u``, put the state into its start
+    row if it has one and restart CVODE there; after each stop copy the state into its row of
+    ``out``, if any. Returns (the first stop not reached, CVODE's last flag, whether the state
+    stayed finite); the counts of each finished segment are added to ``totals``."""
     y = vector_data(as_pointer(vector), out.shape[1])
     flag = 0
-    for row in range(first, last):
-        flag = _call_cvode(function, memory, targets[row], vector, reached)
+    for i in range(first, last):
+        k = plan.starts[i]
+        if k >= 0:
+            if k > 0:
+                _add_counts(functions, memory, counts, totals)
+            plan.u[:] = plan.held[k]
+            if plan.start_rows[k] >= 0:
+                out[plan.start_rows[k]] = y
+            flag = _call_pointer_time_pointer(functions[1], memory, plan.edges[k], vector)
+            if flag >= 0:
+                flag = _call_pointer_time(functions[2], memory, plan.edges[k + 1])
+            if flag < 0:
+                return i, flag, True
+        flag = _call_cvode(functions[0], memory, plan.times[i], vector, reached)
         if flag < 0:
-            return row, flag
-        if row < out.shape[0]:
-            out[row] = y
-    return last, flag
-
-
-_ADVANCE_TYPES = (
-    *(types.int64,) * 4,
-    types.float64[::1],
-    types.int64,
-    types.int64,
-    types.float64[:, ::1],
-)
-"""The argument types :meth:`Cvode.advance_through` passes to the compiled output loop."""
+            return i, flag, True
+        if not np.isfinite(y).all():
+            return i, flag, False
+        if plan.rows[i] >= 0:
+            out[plan.rows[i]] = y
+    return last, flag, True
 
 
 def compile_output_loop() -> None:
-    """Compile (or load from the cache) the output loop for the types the driver passes, so that
-    no simulation's wall clock counts it (see :mod:`pymc_vcc.physics.integration.warmup`)."""
-    _advance.compile(_ADVANCE_TYPES)
+    """Compile (or load from the cache) the loop over the stops for the types the driver passes,
+    so that no simulation's wall clock counts it (see
+    :mod:`pymc_vcc.physics.integration.warmup`)."""
+    counts = np.zeros(3, dtype=np.int64)
+    plan = stop_plan(np.array([0.0, 1.0]), np.zeros((1, 1)), np.array([0.0, 1.0]), np.zeros(1))
+    addresses = np.zeros(len(FUNCTIONS), dtype=np.int64)
+    _add_counts.compile(tuple(map(numba.typeof, (addresses, 0, counts, counts))))
+    arguments = (addresses, 0, 0, 0, plan, 0, 0, np.zeros((1, 1)), counts, counts)
+    _advance.compile(tuple(map(numba.typeof, arguments)))
 
 
 _MEANINGS = {
@@ -246,7 +368,7 @@ class Cvode:
     states, freed with this object."""
 
     CHUNK = 64
-    """Output times integrated by one compiled call between two looks at the wall clock."""
+    """Stops integrated by one compiled call between two looks at the wall clock."""
 
     def __init__(self, callbacks: Callbacks, n: int, rtol: float, atol: np.ndarray) -> None:
         lib = self._lib = library()
@@ -269,12 +391,11 @@ class Cvode:
         """The current state (CVODE's own vector; copy it to keep it)."""
         self.y[:] = 0.0
         self._vector, self._memory, self._t = y, memory, np.zeros(1)
-        self._addresses = (  # what the compiled output loop passes to CVode
-            ctypes.cast(lib.CVode, ctypes.c_void_p).value,
-            memory,
-            y,
-            self._t.ctypes.data,
+        self._functions = np.array(  # the addresses the compiled loop calls
+            [ctypes.cast(getattr(lib, name), ctypes.c_void_p).value for name in FUNCTIONS]
         )
+        self._counts = np.zeros(3, dtype=np.int64)
+        self._totals = np.zeros(3, dtype=np.int64)
         for name, *arguments in (
             ("CVodeInit", callbacks.rhs, 0.0, y),
             ("CVodeSVtolerances", rtol, tolerances),
@@ -292,47 +413,39 @@ class Cvode:
         _check(lib.CVodeSetMinStep(memory, min_step), "CVodeSetMinStep")
         _check(lib.CVodeSetMaxStep(memory, max_step), "CVodeSetMaxStep")
 
-    def restart(self, t0: float, y0: np.ndarray, t_stop: float) -> None:
-        """Start afresh from ``y0`` at ``t0`` (s), never stepping past ``t_stop``; the counts
-        of :meth:`statistics` start again from zero."""
-        self.y[:] = y0
-        self._t[0] = t0
-        _check(self._lib.CVodeReInit(self._memory, t0, self._vector), "CVodeReInit")
-        _check(self._lib.CVodeSetStopTime(self._memory, t_stop), "CVodeSetStopTime")
-
     @property
     def t(self) -> float:
         """The time reached, s."""
         return float(self._t[0])
 
-    def advance_through(
-        self, targets: np.ndarray, out: np.ndarray, deadline: float
-    ) -> tuple[int, int, bool]:
-        """Integrate to each of ``targets`` (s) in turn, the state interpolated at the first
-        ``len(out)`` of them into ``out``'s rows; stop at a failure, or before the next
-        :attr:`CHUNK` of targets once ``time.perf_counter()`` has passed ``deadline``. Returns
-        the targets reached, CVODE's last flag (negative: failed) and whether the deadline
-        stopped it."""
-        addresses = self._addresses
-        done, flag = 0, 0
-        while done < len(targets):
+    def run(
+        self, y0: np.ndarray, plan: StopPlan, out: np.ndarray, deadline: float
+    ) -> tuple[int, int, bool, bool]:
+        """Integrate from ``y0`` at the plan's start through its stops (:class:`StopPlan`), the
+        state at each output time into its row of ``out``, restarting at each segment; stop at
+        a failure or a state not finite, or before the next :attr:`CHUNK` of stops once
+        ``time.perf_counter()`` has passed ``deadline``. Returns the stops reached, CVODE's last
+        flag (negative: failed), whether the state stayed finite and whether the deadline
+        stopped it; :meth:`statistics` then counts the run's work."""
+        self.y[:] = y0
+        self._t[0] = plan.edges[0]
+        self._totals[:] = 0
+        arguments = (self._functions, self._memory, self._vector, self._t.ctypes.data, plan)
+        done, flag, finite, late = 0, 0, True, False
+        while done < plan.times.size and flag >= 0 and finite:
             if time.perf_counter() > deadline:
-                return done, flag, True
-            done, flag = _advance(
-                *addresses, targets, done, min(done + self.CHUNK, len(targets)), out
-            )
-            if flag < 0:
-                return done, flag, False
-        return done, flag, False
+                late = True
+                break
+            last = min(done + self.CHUNK, plan.times.size)
+            done, flag, finite = _advance(*arguments, done, last, out, self._counts, self._totals)
+        if done or flag < 0:  # CVODE was restarted: count its last segment
+            _add_counts(self._functions, self._memory, self._counts, self._totals)
+        return done, flag, finite, late
 
     def statistics(self) -> tuple[int, int, int]:
-        """Steps, right-hand sides and Jacobians since the last :meth:`restart`."""
-        counts = []
-        for name in ("CVodeGetNumSteps", "CVodeGetNumRhsEvals", "CVodeGetNumJacEvals"):
-            count = ctypes.c_long()
-            getattr(self._lib, name)(self._memory, ctypes.byref(count))
-            counts.append(count.value)
-        return counts[0], counts[1], counts[2]
+        """Steps, right-hand sides and Jacobians of the last :meth:`run`."""
+        steps, rhs, jacobians = map(int, self._totals)
+        return steps, rhs, jacobians
 
 
 def _check(flag: int, call: str) -> None:
