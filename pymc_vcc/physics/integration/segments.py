@@ -30,6 +30,7 @@ from scipy.linalg import get_lapack_funcs
 from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.integration import sundials
 from pymc_vcc.physics.integration.solver import Solver
+from pymc_vcc.physics.integration.stops import segment_stops, stop_plan
 
 CVODE_MAX_ORDER = 3
 """Highest BDF order. With orders 4 and 5 (CVODE's default) the onset of a fast transient that
@@ -147,20 +148,19 @@ class RadauSolver:
     def integrate_segments(self, model, y0, edges, held, times, states, deadline):
         y = y0
         dydt = np.empty(y.size)
+        plan = stop_plan(edges, held, times, model.u)
         for k, u in enumerate(held):
-            t0, t1 = float(edges[k]), float(edges[k + 1])
-            last = k == len(held) - 1
             model.u[:] = u
-            in_segment = (times >= t0) & ((times < t1) | (last & (times <= t1)))
-            pending = np.flatnonzero(in_segment)
-            if pending.size and times[pending[0]] == t0:
-                states[pending[0]] = y
-                pending = pending[1:]
+            if plan.start_rows[k] >= 0:
+                states[plan.start_rows[k]] = y
             if not model.rhs(y, dydt):
-                return _property_range_failure(t0)
-            filled = np.full((pending.size, y.size), np.nan)
-            y, failure = self.integrate(model, y, t0, t1, times[pending], filled, deadline)
-            states[pending] = filled
+                return _property_range_failure(float(edges[k]))
+            t_out, rows = segment_stops(plan, k)
+            filled = np.full((rows.size, y.size), np.nan)
+            y, failure = self.integrate(
+                model, y, float(edges[k]), float(edges[k + 1]), t_out, filled, deadline
+            )
+            states[rows] = filled
             if failure is not None:
                 return failure
         return None
@@ -303,7 +303,7 @@ class CvodeSolver:
 
     def integrate_segments(self, model, y0, edges, held, times, states, deadline):
         cvode = self._instance(model)
-        plan = sundials.stop_plan(edges, held, times, model.u)
+        plan = stop_plan(edges, held, times, model.u)
         done, flag, finite, late = cvode.run(y0, plan, states, deadline)
         n_steps, n_rhs, n_jac = cvode.statistics()
         self.counters.n_steps += n_steps

@@ -22,7 +22,6 @@ import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
-from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -30,6 +29,8 @@ from llvmlite import ir
 from numba import carray, njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
+
+from pymc_vcc.physics.integration.stops import StopPlan, stop_plan
 
 CV_BDF = 2
 CV_NORMAL = 1
@@ -237,54 +238,6 @@ def _add_counts(functions, memory, counts, totals):
     for k in range(3):
         _call_pointer_pointer(functions[3 + k], memory, counts.ctypes.data + 8 * k)
         totals[k] += counts[k]
-
-
-class StopPlan(NamedTuple):
-    """Where CVODE stops over a piecewise-constant input profile (:func:`stop_plan`)."""
-
-    times: np.ndarray
-    """Every stop in order, s: the output times and the end of each segment."""
-    rows: np.ndarray
-    """The output row of each stop; -1 for a segment's end that is no output time."""
-    starts: np.ndarray
-    """The segment each stop is the first of; -1 for the others."""
-    held: np.ndarray
-    """Each segment's inputs, a row each."""
-    edges: np.ndarray
-    """The segments' bounds, s (one more than segments)."""
-    start_rows: np.ndarray
-    """The output row at each segment's start time; -1 where none falls there."""
-    u: np.ndarray
-    """The inputs the right-hand side reads (the compiled loop writes each segment's there)."""
-
-
-def stop_plan(edges: np.ndarray, held: np.ndarray, times: np.ndarray, u: np.ndarray) -> StopPlan:
-    """The :class:`StopPlan` of segments ``edges`` (s) holding inputs ``held`` and output
-    ``times`` (s, sorted, from ``edges[0]`` to ``edges[-1]``): an output time on a segment's
-    start is that segment's (the last segment also takes its end)."""
-    stops, rows, starts, start_rows = [], [], [], []
-    last = len(held) - 1
-    for k in range(len(held)):
-        t0, t1 = edges[k], edges[k + 1]
-        lo = int(np.searchsorted(times, t0, side="left"))
-        hi = int(np.searchsorted(times, t1, side="right" if k == last else "left"))
-        at_start = lo < hi and times[lo] == t0
-        start_rows.append(lo if at_start else -1)
-        inside = np.arange(lo + at_start, hi)
-        if not inside.size or times[inside[-1]] != t1:
-            inside = np.append(inside, -1)  # the segment's end, no output time
-        starts += [k] + [-1] * (inside.size - 1)
-        rows.append(inside)
-        stops.append(np.where(inside >= 0, times[np.maximum(inside, 0)], t1))
-    return StopPlan(
-        np.concatenate(stops),
-        np.concatenate(rows).astype(np.int64),
-        np.array(starts, dtype=np.int64),
-        np.ascontiguousarray(held, dtype=np.float64),
-        np.ascontiguousarray(edges, dtype=np.float64),
-        np.array(start_rows, dtype=np.int64),
-        u,
-    )
 
 
 @njit(cache=True)
