@@ -5,7 +5,7 @@ Each *unit* is a truth of a real-units variant (:mod:`pymc_vcc.studies.truths`: 
 sensor errors, drifted parameters...). It is commissioned once (a record of the healthy unit
 calibrated with :func:`~pymc_vcc.studies.unit_log.calibrate_record`), then recorded again in
 every *case* of :data:`CASES` (no fault, or one fault at a stated severity; the same sensors,
-other noise) and
+other noise, a month's wear: :func:`~pymc_vcc.studies.truths.worn_parameters`) and
 each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A case is scored
 
 * no-fault cases (none, or a change below its fault's threshold): ``false alarm`` when a fault
@@ -39,8 +39,7 @@ from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import diagnose
 from pymc_vcc.studies.faults import FAULTS
-from pymc_vcc.studies.record_budget import CHARGE
-from pymc_vcc.studies.truths import VARIANTS, generate_truth
+from pymc_vcc.studies.truths import VARIANTS, generate_truth, record_again, worn_parameters
 from pymc_vcc.studies.unit_log import (
     ALARM_PROBABILITY,
     RECORD_BUDGETS,
@@ -163,17 +162,20 @@ def _case_row(fault_name: str | None, intensity: float, diagnosis) -> dict:
     return row
 
 
-def _faulted(unit, parameters: dict[str, float], case: Case) -> tuple[dict[str, float], float]:
-    """The unit's parameters in ``case`` (the charge apart, kg), and the fault's true
-    intensity."""
+def _faulted(
+    unit, healthy: dict[str, float], worn: dict[str, float], case: Case
+) -> tuple[dict[str, float], float]:
+    """The unit's parameters in ``case``, its changes made to the ``worn`` parameters (the
+    ``healthy`` ones a month later; the charge among them, kg), and the fault's true intensity
+    (against the healthy unit, as the diagnosis reads it against commissioning)."""
     fault_name, changes = case
-    moved = dict(parameters)
+    moved = dict(worn)
     for pid, change in changes.items():
-        moved[pid] = change if pid in unit.faults.ids else parameters[pid] * (1 + change)
+        moved[pid] = change if pid in unit.faults.ids else worn[pid] * (1 + change)
     if fault_name is None:
         return moved, 0.0
     fault = {f.name: f for f in FAULTS}[fault_name]
-    before = {pid: np.array([parameters.get(pid, 0.0)]) for pid in moved}
+    before = {pid: np.array([healthy.get(pid, 0.0)]) for pid in moved}
     after = {pid: np.array([value]) for pid, value in moved.items()}
     return moved, float(fault.intensity(after, before, unit)[0])
 
@@ -288,15 +290,9 @@ def fault_benchmark(
                 if key in done:
                     continue
                 case_started = time.perf_counter()
-                parameters, intensity = _faulted(unit, healthy.parameters, case)
-                later = generate_truth(
-                    variant,
-                    seed + n + 1,
-                    charge=parameters[CHARGE],
-                    parameters=parameters,
-                    n_volumes=healthy.n_volumes,
-                    sensors=healthy,
-                )
+                worn = worn_parameters(unit, healthy.parameters, np.random.default_rng([seed, n]))
+                parameters, intensity = _faulted(unit, healthy.parameters, worn, case)
+                later = record_again(healthy, seed + n + 1, parameters)
                 diagnosis = diagnose(
                     later.observed,
                     later.inputs,

@@ -10,7 +10,8 @@ fraction of intervals covering the true charge, simulations and wall time per da
 the outputs the predictive check flagged.
 
 With ``alarm`` each unit is also recorded twice more, unchanged and with 20 % of its charge
-lost (same unit and sensors, other noise), and each later record is calibrated as ``pymc-vcc
+lost (same unit and sensors, other noise, a month's wear:
+:func:`~pymc_vcc.studies.truths.worn_parameters`), and each later record is calibrated as ``pymc-vcc
 leak LOG --prior`` does (prior :func:`~pymc_vcc.studies.unit_log.later_prior`, alarm
 :func:`~pymc_vcc.studies.unit_log.leak_alarm`): the leak alarm's false-alarm rate on unchanged
 units and its detection rate at a 20 % loss.
@@ -27,9 +28,11 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
-from pymc_vcc.studies.truths import VARIANTS, generate_truth
+from pymc_vcc.studies.truths import VARIANTS, generate_truth, record_again, worn_parameters
 from pymc_vcc.studies.unit_log import (
     ALARM_FRACTION,
     ALARM_PROBABILITY,
@@ -109,15 +112,9 @@ def _dataset(variant, seed, executor, settings, budget, alarm, unit) -> dict:
     row["covers"] = row["low_kg"] <= truth.charge <= row["high_kg"]
     if not alarm:
         return row
+    worn = worn_parameters(unit, truth.parameters, np.random.default_rng([seed, 10_000_000]))
     for name, charge in (("unchanged", truth.charge), ("leaked", (1 - LOSS) * truth.charge)):
-        later = generate_truth(
-            variant,
-            seed + 10_000_000,
-            charge=charge,
-            parameters=truth.parameters,
-            n_volumes=truth.n_volumes,
-            sensors=truth,
-        )
+        later = record_again(truth, seed + 10_000_000, worn | {"M0": charge})
         later_tree, _ = _calibrated(later, executor, settings, budget, tree)
         row[f"alarm_{name}"] = leak_alarm(later_tree, tree, unit, ALARM_FRACTION, seed)
     return row

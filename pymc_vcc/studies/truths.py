@@ -46,6 +46,12 @@ CHARGE_RANGE = (1.0, 2.1)  # kg
 FINE_VOLUMES = (20, 25, 30)  # volumes per coil of a finer unit
 LAG_RANGE = (5.0, 30.0)  # s, first-order sensor time constant
 DRIFT = 0.15  # largest relative change of a non-charge parameter
+WEAR = 0.03
+"""Largest relative change of each :data:`WEARING` parameter between a unit's commissioning and
+a record a month later."""
+WEARING: tuple[str, ...] = ("HTC_CA", "HTC_EA", "FO_FLOW", "FI_FLOW", "CF_LEV", "CF_VOL")
+"""The parameters a unit's use moves between two records: the coils' air sides (fouling), the
+fans' flows (filters, belts), the valve's and the compressor's flow factors (wear)."""
 SETTLE = 600.0  # s at the first inputs before the record starts
 ACCURACY = SensorAccuracy()
 """Bounds of the sensors' constant errors and of the inputs' logging errors: the typical
@@ -97,6 +103,34 @@ def drifted_parameters(
         value = spec.nominal * (1.0 + _uniform(rng, spec.tolerance or drift))
         moved[spec.id] = float(np.clip(value, spec.low, spec.high))
     return moved
+
+
+def worn_parameters(
+    unit: Unit, parameters: Mapping[str, float], rng: np.random.Generator, wear: float = WEAR
+) -> dict[str, float]:
+    """``parameters`` a month of use later: each :data:`WEARING` one × U(1 − wear, 1 + wear),
+    inside its bounds; the rest as they were."""
+    worn = dict(parameters)
+    for pid in WEARING:
+        spec = unit.parameter_spec(pid)
+        value = parameters[pid] * (1.0 + _uniform(rng, wear))
+        worn[pid] = float(np.clip(value, spec.low, spec.high))
+    return worn
+
+
+def record_again(earlier: Truth, seed: int, parameters: Mapping[str, float]) -> Truth:
+    """The unit of ``earlier`` recorded again with ``parameters`` (the charge among them), over
+    the built-in input profile for as long: its coils, sensors and logger as they were, its
+    noise new (drawn from ``seed``)."""
+    return generate_truth(
+        earlier.variant,
+        seed,
+        charge=parameters["M0"],
+        t_end=float(earlier.observed["time"].values[-1]),
+        parameters=parameters,
+        n_volumes=earlier.n_volumes,
+        sensors=earlier,
+    )
 
 
 def logged_inputs(

@@ -217,22 +217,28 @@ def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
 
     unit = load_unit()
     healthy = {spec.id: spec.nominal for spec in unit.parameters} | {"M0": 1.5}
+    worn = healthy | {"HTC_CA": healthy["HTC_CA"] * 1.02, "FI_FLOW": healthy["FI_FLOW"] * 0.97}
     before = {pid: np.array([value]) for pid, value in healthy.items()}
     for case in CASES:
-        moved, intensity = _faulted(unit, healthy, case)
+        moved, intensity = _faulted(unit, healthy, worn, case)
         fault, changes = case
-        if fault is None:  # the unit as it was, or changes at most half a fault's threshold
+        if fault is None:  # the unit as it was, or changes at most half a fault's threshold,
+            # still below three quarters of it with a month's wear
             assert intensity == 0.0 and set(changes) <= set(healthy)
-            after = {pid: np.array([value]) for pid, value in moved.items()}
-            for f in FAULTS:
-                if f.relative:
-                    assert f.intensity(after, before, unit)[0] <= f.threshold / 2 + 1e-12, case
+            unworn, _ = _faulted(unit, healthy, healthy, case)
+            for state, share in ((unworn, 0.5), (moved, 0.75)):
+                after = {pid: np.array([value]) for pid, value in state.items()}
+                for f in FAULTS:
+                    if f.relative:
+                        assert f.intensity(after, before, unit)[0] <= share * f.threshold + 1e-12, case
             continue
         threshold = {f.name: f.threshold for f in FAULTS}[fault]
         assert intensity > threshold  # every case lies beyond its fault's detection threshold
         if fault == "undercharge":
             assert moved["M0"] == pytest.approx(1.5 * (1 + changes["M0"]))
             assert intensity == pytest.approx(-changes["M0"])
+        if "HTC_CA" in changes:  # the fault acts on the worn coil; read against commissioning
+            assert moved["HTC_CA"] == pytest.approx(worn["HTC_CA"] * (1 + changes["HTC_CA"]))
 
 
 def test_a_fault_probability_outside_zero_one_is_refused_before_any_work():

@@ -5,7 +5,16 @@ import pytest
 
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import load_unit
-from pymc_vcc.studies.truths import DRIFT, FINE_VOLUMES, VARIANTS, generate_truth
+from pymc_vcc.studies.truths import (
+    DRIFT,
+    FINE_VOLUMES,
+    VARIANTS,
+    WEAR,
+    WEARING,
+    generate_truth,
+    record_again,
+    worn_parameters,
+)
 
 CHARGE = 1.4
 
@@ -79,12 +88,25 @@ def test_a_later_record_keeps_the_units_sensors_and_logger():
     """Months later the same sensors read: the same lags, biases and constant input errors,
     only the noise is new."""
     first = generate_truth("all", seed=8, charge=CHARGE, t_end=300.0)
-    later = generate_truth(
-        "all", seed=9, charge=CHARGE, t_end=300.0, parameters=first.parameters,
-        n_volumes=first.n_volumes, sensors=first,
-    )  # fmt: skip
+    later = record_again(first, 9, first.parameters)
+    assert later.n_volumes == first.n_volumes and later.parameters == first.parameters
+    assert later.observed["time"].values[-1] == 300.0
     assert later.lags == first.lags and later.biases == first.biases
     assert later.input_offsets == first.input_offsets and first.input_offsets
     assert not np.array_equal(later.observed["TD"].values, first.observed["TD"].values)
     fresh = generate_truth("all", seed=9, charge=CHARGE, t_end=300.0, parameters=first.parameters)
     assert fresh.biases != first.biases
+
+
+def test_a_month_of_wear_moves_the_wearing_parameters_a_little_and_nothing_else():
+    unit = load_unit()
+    healthy = {spec.id: spec.nominal for spec in unit.parameters} | {"M0": 1.5}
+    worn = [worn_parameters(unit, healthy, np.random.default_rng(k)) for k in range(200)]
+    for pid, value in healthy.items():
+        ratios = np.array([w[pid] for w in worn]) / value
+        if pid in WEARING:  # spread over the whole ±WEAR, never beyond
+            assert np.all(np.abs(ratios - 1) <= WEAR) and np.ptp(ratios) > 1.8 * WEAR, pid
+        else:
+            assert np.all(ratios == 1), pid
+    again = worn_parameters(unit, healthy, np.random.default_rng(0))
+    assert again == worn[0]
