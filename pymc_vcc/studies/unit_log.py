@@ -191,7 +191,8 @@ def calibrate_record(
             particle).
 
     Returns:
-        The ArviZ DataTree. When the charge is inferred from a unit's record (``coils``
+        The ArviZ DataTree, the record in it (its outputs in ``observed_data``, its logged
+        inputs in ``constant_data``). When the charge is inferred from a unit's record (``coils``
         ``finer``), ``posterior`` holds the unit's charge in ``M0`` and the model's
         equivalent charge in ``M0_model`` (they differ by the coils' offset,
         :class:`~pymc_vcc.studies.record_budget.CoilOffset`, measured first:
@@ -276,6 +277,7 @@ def calibrate_record(
     stats["error_rounds"] = rounds
     stats["n_simulations"] = simulations + n_check
     tree["sample_stats"] = xr.DataTree(stats)
+    tree["constant_data"] = xr.DataTree(inputs)
     misfit = [name for name in budget.outputs if check[name]["misfit"]]
     if misfit:
         warnings.warn(

@@ -46,6 +46,9 @@ def test_the_models_own_data_is_calibrated_without_a_coil_offset(truth, method):
     assert int(stats["n_simulations"]) == sampled + 2 * 12 + predictive
     charge = tree["posterior"]["M0"]
     assert 0.9 <= float(charge.min()) < float(charge.max()) <= 2.2  # accuracy: the benchmark
+    # the record travels with its posterior: a later analysis can read it again
+    assert tree["observed_data"].to_dataset().equals(truth.observed)
+    assert tree["constant_data"].to_dataset().equals(truth.inputs)
 
 
 def test_a_later_record_takes_a_prior_or_a_commissioning_posterior_not_both():
