@@ -469,12 +469,20 @@ class GMMPrior(Prior):
         return _with_marginal_moments(fitted[0][1], matrix, check)
 
     def with_slabs(
-        self, groups: Sequence[Sequence[str]], probability: float, *, most: int = 2
+        self,
+        groups: Sequence[Sequence[str]],
+        probability: float,
+        *,
+        most: int = 2,
+        downward: Sequence[Sequence[str]] = (),
     ) -> GMMPrior:
         """This mixture as the spike of a spike-and-slab prior: each group of parameters,
         independently with ``probability``, instead spread over its whole range (a logit
         normal of sd :data:`SLAB_SD` about the range's middle: near-uniform), at most ``most``
-        groups at once.
+        groups at once. A group also in ``downward`` spreads below the component's own values
+        only (a fault that only lowers them): each logit normal about the value halfway between
+        the range's low end and the component's, its sd half the logit distance from there to
+        the component's value (2.3 % of it above that value).
 
         Each component of this mixture is repeated once per set of at most ``most`` groups,
         those groups' logits replaced by the slab (independent of the rest), with weight
@@ -484,6 +492,7 @@ class GMMPrior(Prior):
             groups: groups of parameter names (each group is moved or kept together).
             probability: each group's prior probability of being spread, in (0, 1).
             most: largest number of groups spread at once.
+            downward: those of ``groups`` that spread downward only.
         """
         if not 0.0 < probability < 1.0:
             raise ValueError(f"a slab's probability must lie in (0, 1), got {probability}")
@@ -491,16 +500,28 @@ class GMMPrior(Prior):
         if unknown:
             raise ValueError(f"slab group(s) name {unknown}; the prior has {list(self.names)}")
         index = {name: i for i, name in enumerate(self.names)}
+        groups = [tuple(group) for group in groups]
+        lowering = {tuple(group) for group in downward}
+        if not lowering <= set(groups):
+            raise ValueError(f"downward group(s) {sorted(lowering - set(groups))} are not slabs")
         weights, means, covariances = [], [], []
         for k in range(min(most, len(groups)) + 1):
             chance = probability**k * (1.0 - probability) ** (len(groups) - k)
             for spread in itertools.combinations(groups, k):
                 columns = [index[name] for group in spread for name in group]
                 mean, covariance = self.means.copy(), self.covariances.copy()
-                mean[:, columns] = 0.0
                 covariance[:, columns, :] = 0.0
                 covariance[:, :, columns] = 0.0
-                covariance[:, columns, columns] = SLAB_SD**2
+                for group in spread:
+                    at = [index[name] for name in group]
+                    if group in lowering:
+                        # halfway between the low end and the component's value, in the range
+                        half = logit(expit(self.means[:, at]) / 2.0)
+                        mean[:, at] = half
+                        covariance[:, at, at] = ((self.means[:, at] - half) / 2.0) ** 2
+                    else:
+                        mean[:, at] = 0.0
+                        covariance[:, at, at] = SLAB_SD**2
                 weights.append(chance * self.weights)
                 means.append(mean)
                 covariances.append(covariance)

@@ -447,8 +447,9 @@ def later_prior(
     """The prior of a later record of a commissioned unit (a spike and slabs): the unit as
     commissioned (each parameter moved by ``drift`` × its range, the charge the model's own,
     the fault parameters near 0) as the spike, and each fault's parameters
-    (:data:`~pymc_vcc.studies.faults.FAULTS`), with ``probability``, anywhere in their ranges,
-    at most two faults at once.
+    (:data:`~pymc_vcc.studies.faults.FAULTS`), with ``probability``, anywhere in their ranges
+    the fault can move them to (a coil's conductance only below commissioning), at most two
+    faults at once.
 
     The spike is one Gaussian with a full covariance (in the bounds' logit space): the
     commissioning data pin combinations of parameters (the condenser's conductance, not its
@@ -496,7 +497,11 @@ def later_prior(
         drift=drifts,
         covariance="full",
     )
-    return spike.with_slabs(list(dict.fromkeys(fault.parameters for fault in FAULTS)), probability)
+    groups = list(dict.fromkeys(fault.parameters for fault in FAULTS))
+    # a group only a lowering fault moves (a coil's conductance) spreads below commissioning
+    raising = {fault.parameters for fault in FAULTS if fault.direction > 0}
+    lowering = [group for group in groups if group not in raising]
+    return spike.with_slabs(groups, probability, downward=lowering)
 
 
 ALARM_FRACTION = 0.9  # the leak alarm: P(charge <= 0.9 × commissioned)

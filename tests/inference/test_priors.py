@@ -292,6 +292,28 @@ def test_slabs_spread_each_group_with_its_probability_at_most_two_at_once():
         spike.with_slabs([("A",)], 1.5)
 
 
+def test_a_downward_slab_spreads_below_the_spike_only():
+    """A two-parameter group that a fault only lowers: where spread, each parameter lies below
+    the spike's value in 97.7 % of draws (2 sds of its logit normal), a 70 % drop within its
+    lowest 5 %; the other group still spreads both ways."""
+    bounds = {"A": (0.0, 10.0), "B": (0.0, 1.0), "C": (0.0, 1.0)}
+    rng = np.random.default_rng(6)
+    centre = np.array([6.0, 0.7, 0.5])
+    spike = GMMPrior.fit(centre * (1 + 0.01 * rng.standard_normal((300, 3))), bounds, seed=1)
+    prior = spike.with_slabs([("A", "B"), ("C",)], 0.5, downward=[("A", "B")])
+    draws = prior.sample(100_000, rng)
+    spread = np.abs(draws[:, 0] / 6.0 - 1) > 0.05  # A away from the spike
+    assert 0.3 < spread.mean() < 0.7
+    for j, value in ((0, 6.0), (1, 0.7)):
+        below = draws[spread, j] < value
+        assert below.mean() == pytest.approx(0.977, abs=0.01)
+        assert np.quantile(draws[spread, j], 0.05) < 0.3 * value  # a 70 % drop inside its 5 %
+    moved_c = np.abs(draws[:, 2] - 0.5) > 0.1
+    assert 0.3 < np.mean(draws[moved_c, 2] > 0.5) < 0.7  # both ways
+    with pytest.raises(ValueError, match=r"downward group\(s\) \[\('C', 'B'\)\] are not slabs"):
+        spike.with_slabs([("A", "B"), ("C",)], 0.5, downward=[("C", "B")])
+
+
 def test_a_full_covariance_can_be_asked_for_when_the_samples_are_few():
     """40 samples on a ridge in 3-D: by sample count the fit is diagonal and loses the ridge;
     asked for a full covariance, its draws keep the samples' correlation."""
