@@ -219,6 +219,7 @@ def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
     healthy = {spec.id: spec.nominal for spec in unit.parameters} | {"M0": 1.5}
     worn = healthy | {"HTC_CA": healthy["HTC_CA"] * 1.02, "FI_FLOW": healthy["FI_FLOW"] * 0.97}
     before = {pid: np.array([value]) for pid, value in healthy.items()}
+    relative = [f for f in FAULTS if f.relative]
     for case in CASES:
         moved, intensity = _faulted(unit, healthy, worn, case)
         fault, changes = case
@@ -228,7 +229,7 @@ def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
             unworn, _ = _faulted(unit, healthy, healthy, case)
             for state, share in ((unworn, 0.5), (moved, 0.75)):
                 after = {pid: np.array([value]) for pid, value in state.items()}
-                for f in (f for f in FAULTS if f.relative):
+                for f in relative:
                     assert f.intensity(after, before, unit)[0] <= share * f.threshold + 1e-12, case
             continue
         threshold = {f.name: f.threshold for f in FAULTS}[fault]
