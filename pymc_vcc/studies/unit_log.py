@@ -104,6 +104,7 @@ REJECTION_MAIN = 30  # main-phase draws per SMC particle (about 5 % accepted)
 REJECTION_QUANTILE = 0.05
 
 PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
+SIMULATIONS_PER_PARTICLE = 52  # a calibration's default simulation cap per SMC particle
 PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in sample_stats
 
 
@@ -149,6 +150,7 @@ def calibrate_record(
     accuracy: SensorAccuracy | None = None,
     draws: int = RECORD_BUDGETS["small"][0],
     error_draws: int = ERROR_DRAWS,
+    max_simulations: int | None = None,
     seed: int = 0,
     solver: str | Solver = "cvode",
     progressbar: bool = False,
@@ -175,6 +177,11 @@ def calibrate_record(
         accuracy: the sensors' and logged inputs' accuracy.
         draws: SMC particles.
         error_draws: draws of the model-error statistics.
+        max_simulations: the calibration's simulations, at most about (default:
+            :data:`SIMULATIONS_PER_PARTICLE` × ``draws``, 4992 at the small budget): the SMC
+            gets what the coils' offset, the model-error draws and the predictive check leave,
+            and makes fewer mutation steps where it would run over (``max_simulations`` of
+            :func:`~pymc_vcc.inference.pymc.smc.sample_smc_abc`).
         seed: seeds every random draw.
         solver: ODE solver, a method name or a
             :class:`~pymc_vcc.physics.integration.solver.Solver`.
@@ -213,6 +220,8 @@ def calibrate_record(
         raise ValueError(f"rounds must be at least 1, got {rounds}")
     check_coils(coils)
     check_method(method)
+    if max_simulations is None:
+        max_simulations = SIMULATIONS_PER_PARTICLE * draws
     rng = np.random.default_rng(seed)
     t_end = float(observed["time"].values[-1])
     model = VCCSimulator(
@@ -239,8 +248,8 @@ def calibrate_record(
             executor,
             (spec.low, spec.high),
         )
-    for last in [False] * (rounds - 1) + [True]:
-        share = 1.0 if last else SCOUTING_SHARE
+    for round_left in reversed(range(rounds)):
+        share = SCOUTING_SHARE if round_left else 1.0
         n_error = max(MIN_ERROR_DRAWS, round(share * error_draws))
         budget = error_budget(
             model,
@@ -254,11 +263,23 @@ def calibrate_record(
             offset=offset,
             coils=coils,
         )
+        simulations += RUNS_PER_DRAW[coils] * n_error
         particles = max(MIN_PARTICLES, round(share * draws))
+        to_come = PREDICTIVE_DRAWS + round_left * RUNS_PER_DRAW[coils] * error_draws
+        affordable = share * (max_simulations - simulations - to_come)
         tree, n_sampled = _sample(
-            method, model, observed, budget, prior, particles, executor, seed, progressbar
+            method,
+            model,
+            observed,
+            budget,
+            prior,
+            particles,
+            max(1, int(affordable)),
+            executor,
+            seed,
+            progressbar,
         )
-        simulations += RUNS_PER_DRAW[coils] * n_error + n_sampled
+        simulations += n_sampled
         thetas = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
     check, n_check = _predictive_check(tree, model, budget, executor, rng)
     stats = tree["sample_stats"].to_dataset()
@@ -299,11 +320,13 @@ def _sample(
     budget: ErrorBudget,
     prior: Prior,
     particles: int,
+    max_simulations: int,
     executor: Executor,
     seed: int,
     progressbar: bool,
 ) -> tuple[xr.DataTree, int]:
-    """The posterior under ``budget`` by ``method``, and its simulations."""
+    """The posterior under ``budget`` by ``method``, and its simulations (SMC's soft cap
+    ``max_simulations``; the rejection's budget is set by ``particles``)."""
     if method == "rejection":
         tree = abc_rejection(
             model,
@@ -320,7 +343,11 @@ def _sample(
     with pm.Model():
         add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
         tree = sample_smc_abc(
-            particles, executor=executor, random_seed=seed, progressbar=progressbar
+            particles,
+            executor=executor,
+            random_seed=seed,
+            progressbar=progressbar,
+            max_simulations=max_simulations,
         )
     stats = tree["sample_stats"]
     return tree, int(stats["simulations"].sum() + stats["resumed_simulations"].sum())

@@ -83,7 +83,9 @@ def test_results_do_not_depend_on_the_executor():
         assert name in parallel.sample_stats.attrs["executor"]
 
 
-def _gaussian_location_run(draws: int, max_steps: int | None, kernel: str = "imh"):
+def _gaussian_location_run(
+    draws: int, max_steps: int | None, kernel: str = "imh", max_simulations: int | None = None
+):
     """SMC-ABC of GaussianLocation and its exact ABC posterior's mean and sd: with a Gaussian
     kernel on the whitened sufficient statistic it is N(ȳ, se²(1 + ε²)) truncated to the box."""
     sim = GaussianLocation()
@@ -97,6 +99,7 @@ def _gaussian_location_run(draws: int, max_steps: int | None, kernel: str = "imh
             executor="serial",
             random_seed=0,
             max_steps=max_steps,
+            max_simulations=max_simulations,
             kernel=kernel,
             **QUIET,
         )
@@ -126,6 +129,21 @@ def test_a_step_cap_bounds_each_stage():
     assert per_stage[0] <= 3 * 400 and (per_stage[1:] <= 2 * 400).all()
     assert free.sample_stats["simulations"].values.max() > 2 * 400  # the cap did bind
     assert capped.sample_stats.attrs["max_steps"] == 2
+
+
+def test_a_simulation_budget_cuts_steps_not_the_posterior():
+    with pm.Model(), pytest.raises(ValueError, match="max_simulations must be a positive integer"):
+        sample_smc_abc(draws=10, executor="serial", max_simulations=0, **QUIET)
+    free, mean, sd = _gaussian_location_run(400, None)
+    capped, _, _ = _gaussian_location_run(400, None, max_simulations=4000)
+    assert int(free.sample_stats["n_simulations"]) > 2 * 4000  # the budget binds
+    per_stage = capped.sample_stats["simulations"].values.ravel()
+    assert per_stage.sum() <= 4000
+    assert (per_stage[-2:] == 400).all()  # one step a stage once the budget is near
+    draws = capped.posterior["mu"].values.ravel()
+    assert abs(draws.mean() - mean) < 0.3 * sd
+    assert 0.85 < draws.std() / sd < 1.15
+    assert capped.sample_stats.attrs["max_simulations"] == 4000
 
 
 @pytest.mark.parametrize("kernel", ["imh", "mh"])

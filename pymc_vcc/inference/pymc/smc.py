@@ -136,6 +136,10 @@ class ParallelKernel:
         max_steps: at most this many mutation steps per stage (default: PyMC's rule alone,
             stepping until the particles' correlation with the stage's start stops falling,
             which in many dimensions with low acceptance takes dozens of steps).
+        max_simulations: a chain's simulation budget (default: none). A stage's mutation
+            steps after its first stop where another would leave less than one step for each
+            stage still to come, those estimated from the last stage's growth of β (a soft
+            cap: every stage still makes one step).
         reference: temper from this Gaussian mixture over the value space instead of the prior
             (:mod:`pymc_vcc.inference.pymc.laplace`): the initial particles are its draws, and
             the tempering term is prior + likelihood − reference, so that β = 1 is still the
@@ -150,10 +154,12 @@ class ParallelKernel:
         checkpoint: LikelihoodStore | None = None,
         correlation_threshold=0.01,
         max_steps: int | None = None,
+        max_simulations: int | None = None,
         reference: GaussianReference | None = None,
         **kwargs,
     ) -> None:
         self.max_steps = check_max_steps(max_steps)
+        self.max_simulations = check_max_steps(max_simulations, "max_simulations")
         self.reference = reference
         compile_kwargs = dict(kwargs.get("compile_kwargs") or {})
         super().__init__(*args, correlation_threshold=correlation_threshold, **kwargs)
@@ -210,6 +216,8 @@ class ParallelKernel:
         # the chain generator that drives proposals and resampling.
         self._seeds = rng.bit_generator.seed_seq.spawn(1)[0]
         self._reset_stage_counters()
+        self._spent = 0  # the chain's simulations, run or resumed, against max_simulations
+        self._previous_beta = 0.0
         self._finished = self.checkpoint.load() if self.checkpoint is not None else {}
         super().initialize(start, rng)
 
@@ -261,6 +269,7 @@ class ParallelKernel:
         failures = sum(record.status != OK for record in records)
         resumed = len(tasks) - len(todo)
         self._stage_simulations += len(todo)
+        self._spent += len(tasks)
         self._stage_resumed += resumed
         self._stage_failures += failures
         loglik[allowed] = self._likelihood.evaluate(
@@ -337,12 +346,30 @@ class ParallelKernel:
 
             if self.max_steps is not None and len(accepted_steps) >= self.max_steps:
                 break
+            if not self._affords_step():
+                break
             pearson_r = correlation.get(self.tempered_posterior)
             if np.mean((old_correlation - pearson_r) > self.correlation_threshold) > 0.9:
                 old_correlation = pearson_r
             else:
                 break
         self._record_acceptance(np.array(accepted_steps))
+
+    def update_beta_and_weights(self) -> None:
+        self._previous_beta = self.beta
+        super().update_beta_and_weights()
+
+    def _affords_step(self) -> bool:
+        """Whether another mutation step leaves one step for each stage to come within
+        :attr:`max_simulations` (always, without a budget)."""
+        if self.max_simulations is None:
+            return True
+        to_come = 0
+        if 0 < self._previous_beta < self.beta < 1:
+            growth = np.log(self.beta / self._previous_beta)
+            to_come = int(np.ceil(-np.log(self.beta) / growth))
+        step = self.draws * self._likelihood.n_nodes
+        return self._spent + step * (1 + to_come) <= self.max_simulations
 
     def sample_stats(self) -> dict[str, int | float]:
         now = time.perf_counter()
@@ -375,6 +402,7 @@ class ParallelKernel:
             "failure_examples": " | ".join(self.failure_reasons),
             "median_log_likelihood": float(np.median(self._data_loglik())),
             "max_steps": self.max_steps or 0,  # 0: no cap
+            "max_simulations": self.max_simulations or 0,
             "executor": repr(self.executor),
         }
 
@@ -450,14 +478,17 @@ def _run_settings(
     threshold: float,
     correlation: float,
     max_steps: int | None,
+    max_simulations: int | None,
     kernel: str,
     reference: GaussianReference | None,
 ) -> dict[str, Any]:
     """What a resumed run must share with the checkpointed one (besides the seed)."""
     nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
-    # a step cap and a kernel other than IMH are named only when set, so runs checkpointed
-    # before they existed still resume
+    # step and simulation caps and a kernel other than IMH are named only when set, so runs
+    # checkpointed before they existed still resume
     capped = {} if max_steps is None else {"max_steps": int(max_steps)}
+    if max_simulations is not None:
+        capped["max_simulations"] = int(max_simulations)
     other_kernel = {} if kernel == "imh" else {"kernel": kernel}
     start = {} if reference is None else {"reference": reference.digest()}
     return {
@@ -492,6 +523,7 @@ def sample_smc_abc(
     threshold: float = 0.5,
     correlation_threshold: float = 0.01,
     max_steps: int | None = None,
+    max_simulations: int | None = None,
     kernel: SmcKernel = "imh",
     reference: GaussianReference | None = None,
     progressbar: bool = True,
@@ -525,6 +557,8 @@ def sample_smc_abc(
         model: the PyMC model (default: the current context).
         threshold, correlation_threshold: as for ``pm.sample_smc``'s IMH kernel.
         max_steps: at most this many mutation steps per stage (see :class:`ParallelIMH`).
+        max_simulations: each chain's simulation budget, a soft cap on its mutation steps
+            (see :class:`ParallelKernel`).
         kernel: the mutation kernel, a name of :data:`KERNELS`: ``"imh"`` (independent
             proposals, PyMC's default) or ``"mh"`` (random-walk steps).
         reference: temper from this Gaussian mixture instead of the prior (see
@@ -548,6 +582,7 @@ def sample_smc_abc(
     if int(draws) != draws or draws < 2:
         raise ValueError(f"draws must be an integer >= 2, got {draws}")
     check_max_steps(max_steps)
+    check_max_steps(max_simulations, "max_simulations")
     check_kernel(kernel)
     kwargs.setdefault("compute_convergence_checks", chains > 1)
     model = modelcontext(model)
@@ -563,7 +598,15 @@ def sample_smc_abc(
                 f"{random_seed!r}"
             )
         settings = _run_settings(
-            model, draws, chains, threshold, correlation_threshold, max_steps, kernel, reference
+            model,
+            draws,
+            chains,
+            threshold,
+            correlation_threshold,
+            max_steps,
+            max_simulations,
+            kernel,
+            reference,
         )
         store = LikelihoodStore(checkpoint, settings, random_seed)
         random_seed = store.entropy
@@ -594,6 +637,7 @@ def sample_smc_abc(
                 threshold=threshold,
                 correlation_threshold=correlation_threshold,
                 max_steps=max_steps,
+                max_simulations=max_simulations,
                 reference=reference,
                 **kwargs,
             )
