@@ -14,7 +14,8 @@ lost (same unit and sensors, other noise, a month's wear:
 :func:`~pymc_vcc.studies.truths.worn_parameters`), and each later record is calibrated as ``pymc-vcc
 leak LOG --prior`` does (prior :func:`~pymc_vcc.studies.unit_log.later_prior`, alarm
 :func:`~pymc_vcc.studies.unit_log.leak_alarm`): the leak alarm's false-alarm rate on unchanged
-units and its detection rate at a 20 % loss.
+units and its detection rate at a 20 % loss (each row keeps the later records' charge readings
+too, ``later_unchanged`` and ``later_leaked``).
 
 Each finished dataset is appended to ``<out>/checkpoints/validate-real-units.jsonl`` as it
 completes; ``resume`` skips the datasets already there.
@@ -115,8 +116,9 @@ def _dataset(variant, seed, executor, settings, budget, alarm, unit) -> dict:
     worn = worn_parameters(unit, truth.parameters, np.random.default_rng([seed, 10_000_000]))
     for name, charge in (("unchanged", truth.charge), ("leaked", (1 - LOSS) * truth.charge)):
         later = record_again(truth, seed + 10_000_000, worn | {"M0": charge})
-        later_tree, _ = _calibrated(later, executor, settings, budget, tree)
+        later_tree, later_row = _calibrated(later, executor, settings, budget, tree)
         row[f"alarm_{name}"] = leak_alarm(later_tree, tree, unit, ALARM_FRACTION, seed)
+        row[f"later_{name}"] = later_row | {"truth_kg": charge}
     return row
 
 
