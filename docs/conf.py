@@ -35,7 +35,7 @@ extensions = [
     "sphinx.ext.napoleon",
 ]
 source_suffix = {".md": "myst-nb", ".ipynb": "myst-nb", ".rst": "restructuredtext"}
-exclude_patterns = ["_build", "**/.ipynb_checkpoints"]
+exclude_patterns = ["_build", "**/.ipynb_checkpoints", "results/runs"]
 templates_path: list[str] = []
 
 # Notebooks: the stored outputs, nothing executed.
