@@ -230,33 +230,52 @@ class ErrorBudget:
         return table
 
 
+def model_errors[T](
+    pair: Callable[[T], tuple[np.ndarray, np.ndarray] | None],
+    draws: Sequence[T],
+    windows: Sequence[np.ndarray],
+    executor: Executor,
+) -> list[np.ndarray | None]:
+    """The unit − model summaries of each draw, None where a simulation failed.
+
+    ``pair(draw)`` returns the (outputs, time) series of the unit and of the model for one
+    draw, or None when either simulation failed; it runs on the executor's workers.
+    """
+    runs = executor.map(pair, list(draws))
+    return [
+        None if run is None else summarise(run[0], windows) - summarise(run[1], windows)
+        for run in runs
+    ]
+
+
+def error_moments(errors: Sequence[np.ndarray | None]) -> tuple[np.ndarray, np.ndarray, int]:
+    """Mean and covariance of the ``errors`` that are not None, and their count. The
+    correlations are shrunk toward the identity by the amount that best predicts held-out
+    draws (5-fold cross-validated likelihood over :data:`SHRINKAGES`): the errors come from a
+    few causes and are strongly correlated, which Ledoit-Wolf's shrinkage, tuned for a
+    different loss, blurs away."""
+    found = [error for error in errors if error is not None]
+    if len(found) < 10:
+        raise RuntimeError(
+            f"only {len(found)} of {len(errors)} model-error simulations succeeded; at least 10 "
+            "are needed for the model-error covariance"
+        )
+    sample = np.asarray(found)
+    scale = sample.std(axis=0) + 1e-12 * np.abs(sample).max(axis=0) + 1e-300
+    search = GridSearchCV(ShrunkCovariance(), {"shrinkage": SHRINKAGES}, cv=5)
+    shrunk = search.fit(sample / scale).best_estimator_.covariance_
+    return sample.mean(axis=0), shrunk * np.outer(scale, scale), len(found)
+
+
 def approximation_error[T](
     pair: Callable[[T], tuple[np.ndarray, np.ndarray] | None],
     draws: Sequence[T],
     windows: Sequence[np.ndarray],
     executor: Executor,
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Mean and covariance of unit − model summaries over ``draws``, and how many draws
-    succeeded. The correlations are shrunk toward the identity by the amount that best
-    predicts held-out draws (5-fold cross-validated likelihood over :data:`SHRINKAGES`):
-    the errors come from a few causes and are strongly correlated, which Ledoit-Wolf's
-    shrinkage, tuned for a different loss, blurs away.
-
-    ``pair(draw)`` returns the (outputs, time) series of the unit and of the model for one
-    draw, or None when either simulation failed; it runs on the executor's workers.
-    """
-    runs = executor.map(pair, list(draws))
-    errors = [summarise(u, windows) - summarise(m, windows) for u, m in filter(None, runs)]
-    if len(errors) < 10:
-        raise RuntimeError(
-            f"only {len(errors)} of {len(draws)} model-error simulations succeeded; at least 10 "
-            "are needed for the model-error covariance"
-        )
-    sample = np.asarray(errors)
-    scale = sample.std(axis=0) + 1e-12 * np.abs(sample).max(axis=0) + 1e-300
-    search = GridSearchCV(ShrunkCovariance(), {"shrinkage": SHRINKAGES}, cv=5)
-    shrunk = search.fit(sample / scale).best_estimator_.covariance_
-    return sample.mean(axis=0), shrunk * np.outer(scale, scale), len(errors)
+    """Mean and covariance of unit − model summaries over ``draws`` (:func:`model_errors`,
+    :func:`error_moments`), and how many draws succeeded."""
+    return error_moments(model_errors(pair, draws, windows, executor))
 
 
 def lagged(values: np.ndarray, taus: np.ndarray, dt: float) -> np.ndarray:

@@ -22,7 +22,9 @@ from pymc_vcc.inference.error_model import (
     SensorAccuracy,
     approximation_error,
     bias_covariance,
+    error_moments,
     lagged,
+    model_errors,
     noise_variance,
     plateau_windows,
     summarise,
@@ -159,7 +161,10 @@ def _series(run: xr.Dataset) -> np.ndarray:
 class ErrorPair:
     """Picklable: the unit's and the model's series for one draw of what is not inferred (the
     unit is the model's coils moved ``fineness`` steps toward :data:`FINE_VOLUMES`, its
-    charge ``fineness`` × :class:`CoilOffset` below the model's; 3 runs, 2 at fineness 0)."""
+    charge ``fineness`` × :class:`CoilOffset` below the model's; 3 runs, 2 at fineness 0).
+    The model runs at the draw's ``model_theta`` where it has one (:func:`compensate`), else at
+    the unit's ``theta``; with ``biases`` (a share of each sensor's accuracy bound, in
+    [-1, 1]) the unit's sensors read off by them."""
 
     model: VCCSimulator
     fine_unit: Unit
@@ -168,11 +173,14 @@ class ErrorPair:
     offset: CoilOffset | None = None
 
     def __call__(self, draw: dict) -> tuple[np.ndarray, np.ndarray] | None:
+        model_theta = draw.get("model_theta", draw["theta"])
+        if model_theta is None:  # its commissioning runs failed: no compensation known
+            return None
         logged = self.accuracy.shift_inputs(self.model.inputs, draw["input_errors"])
         true_parameters = {**draw["fixed"], **draw["theta"]}
         runs = [
             _unit_runs(self.model, self.model.unit, logged)(true_parameters),
-            self.model(draw["theta"]),
+            self.model(model_theta),
         ]
         if draw["fineness"] > 0.0:
             fine_parameters = dict(true_parameters)
@@ -187,7 +195,12 @@ class ErrorPair:
         )
         unit = coarse + draw["fineness"] * (fine[0] - coarse) if fine else coarse
         dt = float(np.median(np.diff(self.times)))
-        return lagged(unit, draw["lags"], dt), model
+        unit = lagged(unit, draw["lags"], dt)
+        for j, share in enumerate(draw.get("biases", ())):  # of each sensor's accuracy bound
+            units = runs[0][self.model.output_names[j]].attrs["units"]
+            bound, relative = self.accuracy.bias_bound(units)
+            unit[j] = unit[j] * (1.0 + share * bound) if relative else unit[j] + share * bound
+        return unit, model
 
 
 STEP_THRESHOLDS = {
@@ -299,6 +312,7 @@ def error_budget(
     thetas: np.ndarray | None = None,
     offset: CoilOffset | None = None,
     coils: str = "finer",
+    commissioning: Commissioning | None = None,
 ) -> ErrorBudget:
     """The error budget of ``observed`` (outputs of ``model``, on its time grid) for a
     calibration of ``prior``'s parameters (see the module docstring); the inferred parameters
@@ -306,7 +320,10 @@ def error_budget(
     posterior's draws) or ``n_draws`` draws of the prior. With ``offset``, the model's error
     is drawn against finer coils at the charge that reads the same (:class:`CoilOffset`);
     ``coils`` says whose coils made the record (:data:`COILS`: with ``model`` the unit of
-    every draw has the model's coils)."""
+    every draw has the model's coils). For a later record of a commissioned unit,
+    ``commissioning`` gives each draw's model the parameters the commissioning calibration
+    would have found for its unit (:func:`compensate`: :attr:`Commissioning.runs` more
+    simulations, and the draws' own on the commissioning record)."""
     check_coils(coils)
     continuum = CONTINUUM if coils == "finer" else 0.0
     accuracy = SensorAccuracy() if accuracy is None else accuracy
@@ -326,6 +343,15 @@ def error_budget(
         }
         for row in thetas
     ]
+    sensor_parts = sensors.parts
+    if commissioning is not None:  # the sensors' biases, shared by both records, in the draws
+        names = commissioning.model.parameter_names
+        for draw in draws:
+            row = commissioning.draws[rng.integers(len(commissioning.draws))]
+            draw["theta_c"] = dict(zip(names, map(float, row), strict=True))
+            draw["biases"] = rng.uniform(-1.0, 1.0, len(sensors.outputs))
+        compensate(draws, commissioning, executor, accuracy, fine_volumes)
+        sensor_parts = {"noise": sensors.parts["noise"]}
     pair = ErrorPair(
         model,
         model.unit.with_changes(discretisation={"n_volumes": fine_volumes}),
@@ -339,7 +365,116 @@ def error_budget(
         windows=sensors.windows,
         observed=sensors.observed,
         mean=mean,
-        parts={**sensors.parts, "model": model_cov},
+        parts={**sensor_parts, "model": model_cov},
         n_draws=n_ok,
         n_failed=n_draws - n_ok,
     )
+
+
+COMPENSATION_STEP = 0.02  # finite-difference step of the commissioning Jacobian, of each range
+COMPENSATION_SPREAD = 0.5  # prior sd of a compensation, a fraction of each range (a ridge)
+
+
+@dataclass(frozen=True)
+class Commissioning:
+    """A commissioned unit's record and posterior, for a later record's model error
+    (:func:`compensate`).
+
+    Attributes:
+        model: the model on the commissioning record (its held inputs, window, outputs), its
+            parameters the commissioning calibration's (the model's charge first).
+        observed: the commissioning record's outputs.
+        draws: the commissioning posterior's draws, rows in ``model.parameter_names`` order.
+        offset: the coils' offset measured on the commissioning record (None: model coils).
+    """
+
+    model: VCCSimulator
+    observed: xr.Dataset
+    draws: np.ndarray
+    offset: CoilOffset | None = None
+
+    @property
+    def runs(self) -> int:
+        """Simulations of :func:`compensate` besides its draws' (the Jacobian's)."""
+        return len(self.model.parameter_names) + 1
+
+
+def _run(task: tuple[VCCSimulator, dict[str, float]]) -> xr.Dataset:
+    simulator, theta = task
+    return simulator(theta)
+
+
+def _jacobian(
+    model: VCCSimulator, centre: np.ndarray, windows: Sequence[np.ndarray], executor: Executor
+) -> np.ndarray:
+    """∂ summaries / ∂ parameters of ``model`` at ``centre`` (forward differences of
+    :data:`COMPENSATION_STEP` × each range, backward at the upper bound)."""
+    names = model.parameter_names
+    specs = [model.unit.parameter_spec(name) for name in names]
+    steps = np.array([COMPENSATION_STEP * (spec.high - spec.low) for spec in specs])
+    steps = np.where(centre + steps > [spec.high for spec in specs], -steps, steps)
+    points = [centre] + [centre + step * np.eye(len(names))[k] for k, step in enumerate(steps)]
+    runs = executor.map(
+        _run, [(model, dict(zip(names, map(float, p), strict=True))) for p in points]
+    )
+    if any(run.attrs["status"] != "ok" for run in runs):
+        raise RuntimeError("the model failed at the commissioning posterior's mean")
+    summaries = np.array([summarise(_series(run), windows) for run in runs])
+    return ((summaries[1:] - summaries[0]) / steps[:, None]).T
+
+
+def compensate(
+    draws: list[dict],
+    commissioning: Commissioning,
+    executor: Executor,
+    accuracy: SensorAccuracy,
+    fine_volumes: int = FINE_VOLUMES,
+) -> None:
+    """Give each model-error draw of a later record its ``model_theta``: the model's parameters
+    moved as the commissioning calibration moved them to absorb that draw's unit.
+
+    A calibration absorbs part of a unit's difference from the model into its parameters; a
+    later record of the same unit meets the model at those absorbed values, and what they
+    absorbed at commissioning does not hold at another charge. Each draw's unit (its held
+    parameters, coils, logged inputs, sensors' lags and biases) is simulated on the
+    commissioning record at a commissioning posterior draw (``draw["theta_c"]``), its
+    summaries' error against the model there taken as the commissioning calibration would,
+    linearised: the parameters move by
+    (Jᵀ W J + P)⁻¹ Jᵀ W (e − ē), J the model's Jacobian at the posterior mean, W the
+    commissioning budget's precision, P a ridge of :data:`COMPENSATION_SPREAD`. The draw's
+    model then runs at its later parameters so moved (inside the bounds). A draw whose
+    commissioning runs failed gets None (it fails)."""
+    model = commissioning.model
+    names = model.parameter_names
+    sensors = SensorBudget.of(model, commissioning.observed, accuracy)
+    jacobian = _jacobian(model, commissioning.draws.mean(axis=0), sensors.windows, executor)
+    pair = ErrorPair(
+        model,
+        model.unit.with_changes(discretisation={"n_volumes": fine_volumes}),
+        commissioning.observed["time"].values,
+        accuracy,
+        commissioning.offset,
+    )
+    errors = model_errors(
+        pair, [{**draw, "theta": draw["theta_c"]} for draw in draws], sensors.windows, executor
+    )
+    mean, covariance, _ = error_moments(errors)
+    precision = np.linalg.inv(covariance + sensors.parts["noise"])
+    specs = [model.unit.parameter_spec(name) for name in names]
+    ranges = np.array([spec.high - spec.low for spec in specs])
+    ridge = np.diag(1.0 / (COMPENSATION_SPREAD * ranges) ** 2)
+    gain = np.linalg.solve(jacobian.T @ precision @ jacobian + ridge, jacobian.T @ precision)
+    for draw, error in zip(draws, errors, strict=True):
+        if error is None:
+            draw["model_theta"] = None
+            continue
+        shift = dict(zip(names, gain @ (error - mean), strict=True))
+        draw["model_theta"] = {
+            name: float(np.clip(value + shift.get(name, 0.0), *_bounds(model.unit, name)))
+            for name, value in draw["theta"].items()
+        }
+
+
+def _bounds(unit: Unit, name: str) -> tuple[float, float]:
+    spec = unit.parameter_spec(name)
+    return spec.low, spec.high
