@@ -331,10 +331,19 @@ def _commissioning_record(
     """The commissioning record behind a commissioning posterior, for the later record's
     model error (:func:`~pymc_vcc.studies.record_budget.compensate`); None for a posterior
     written without its record (before the record travelled with it) or of other outputs."""
-    if commissioning is None or not {"observed_data", "constant_data"} <= set(commissioning):
+    if commissioning is None:
         return None
-    observed = commissioning["observed_data"].to_dataset()
-    if list(observed.data_vars) != list(model.output_names):
+    observed = None
+    if {"observed_data", "constant_data"} <= set(commissioning):
+        observed = commissioning["observed_data"].to_dataset()
+    if observed is None or list(observed.data_vars) != list(model.output_names):
+        warnings.warn(
+            "the commissioning posterior holds no record of the later record's outputs (it was "
+            "written before a calibration kept its record, or logged other sensors): the model "
+            "error is drawn without what the commissioning absorbed, and a large leak reads "
+            "short; calibrate the commissioning log again to keep it",
+            stacklevel=3,
+        )
         return None
     posterior = commissioning["posterior"]
     names = [
