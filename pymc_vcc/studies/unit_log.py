@@ -179,7 +179,7 @@ def calibrate_record(
             both records (:func:`~pymc_vcc.studies.record_budget.compensate`; twice the
             error draws' simulations): a unit's differences from the model, absorbed into its
             parameters at commissioning, stop being absorbed at another charge, and read as
-            a smaller leak without it (a 20 % loss read as 10-12 %).
+            a smaller leak without it (some units' 20 % loss read as 10-12 %).
         drift, fault_probability: see :func:`later_prior`.
         parameters: the inferred parameters (default: the charge and :data:`NUISANCE`).
         accuracy: the sensors' and logged inputs' accuracy.
