@@ -245,6 +245,7 @@ def calibrate_record(
     thetas, simulations, offset, commissioned = None, 0, None, None
     if error_prior is not None:
         thetas = error_prior.sample(error_draws, rng)
+    if commissioning is not None:
         commissioned = _commissioning_record(commissioning, model)
     if CHARGE in prior.names and coils == "finer":
         sensors = SensorBudget.of(model, observed, accuracy)
@@ -325,14 +326,10 @@ def calibrate_record(
     return tree
 
 
-def _commissioning_record(
-    commissioning: xr.DataTree | None, model: VCCSimulator
-) -> Commissioning | None:
+def _commissioning_record(commissioning: xr.DataTree, model: VCCSimulator) -> Commissioning | None:
     """The commissioning record behind a commissioning posterior, for the later record's
     model error (:func:`~pymc_vcc.studies.record_budget.compensate`); None for a posterior
     written without its record (before the record travelled with it) or of other outputs."""
-    if commissioning is None:
-        return None
     observed = None
     if {"observed_data", "constant_data"} <= set(commissioning):
         observed = commissioning["observed_data"].to_dataset()
