@@ -274,11 +274,9 @@ def calibrate_record(
             coils=coils,
             commissioning=commissioned,
         )
-        simulations += RUNS_PER_DRAW[coils] * n_error
-        if commissioned is not None:
-            simulations += RUNS_PER_DRAW[coils] * n_error + commissioned.runs
+        simulations += _error_runs(n_error, coils, commissioned)
         particles = max(MIN_PARTICLES, round(share * draws))
-        to_come = PREDICTIVE_DRAWS + round_left * RUNS_PER_DRAW[coils] * error_draws
+        to_come = PREDICTIVE_DRAWS + round_left * _error_runs(error_draws, coils, commissioned)
         affordable = share * (max_simulations - simulations - to_come)
         tree, n_sampled = _sample(
             method,
@@ -324,6 +322,13 @@ def calibrate_record(
             stacklevel=2,
         )
     return tree
+
+
+def _error_runs(n_draws: int, coils: str, commissioned: Commissioning | None) -> int:
+    """Simulations of an error budget of ``n_draws`` draws: each draw's pair, and with a
+    commissioning record each draw's unit on it too and the commissioning Jacobian."""
+    runs = RUNS_PER_DRAW[coils] * n_draws
+    return runs if commissioned is None else 2 * runs + commissioned.runs
 
 
 def _commissioning_record(commissioning: xr.DataTree, model: VCCSimulator) -> Commissioning | None:
