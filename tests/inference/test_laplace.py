@@ -82,6 +82,40 @@ def test_gaussian_reference_matches_scipy():
         GaussianReference(mean, -np.eye(3))
 
 
+def test_a_weighted_mixture_reference_is_the_mixture_prior_in_the_value_space():
+    """``of_mixture``: the reference's density is PyMC's value-space density of the prior
+    variable (so tempering from it is tempering from the prior), and its draws follow the
+    weights."""
+    from scipy.special import logit
+
+    from pymc_vcc.inference.priors import GMMPrior
+    from pymc_vcc.inference.pymc.model import prior_variables
+
+    bounds = {"a": (0.0, 2.0), "b": (-1.0, 1.0)}
+    prior = GMMPrior(
+        bounds,
+        np.array([0.8, 0.2]),
+        np.array([[0.0, 0.5], [2.0, -1.0]]),
+        np.array([np.eye(2) * 0.3, [[0.5, 0.1], [0.1, 0.2]]]),
+    )
+    reference = GaussianReference.of_mixture(prior)
+    with pm.Model() as model:
+        prior_variables(prior)
+    value_logp = model.compile_logp(jacobian=True)
+    (value_var,) = model.value_vars
+    rng = np.random.default_rng(1)
+    points = prior.means[rng.integers(2, size=6)] + rng.normal(size=(6, 2))
+    expected = [value_logp({value_var.name: point}) for point in points]
+    np.testing.assert_allclose(reference.logpdf(points), expected, rtol=1e-10)
+    draws = reference.sample(5000, rng)
+    assert 0.77 < np.mean(np.linalg.norm(draws - prior.means[0], axis=1) < 2.0) < 0.83
+    inside = prior.sample(4000, rng)  # the same mixture, drawn in the parameters' units
+    places = logit((inside - prior.lower) / (prior.upper - prior.lower))
+    assert abs(np.mean(places[:, 0] > 1.0) - np.mean(draws[:, 0] > 1.0)) < 0.04
+    with pytest.raises(ValueError, match="summing to 1"):
+        GaussianReference(prior.means, prior.covariances, weights=np.array([0.5, 0.6]))
+
+
 def test_smc_from_the_fit_gives_the_exact_posterior_with_fewer_simulations(quiet_pymc, tmp_path):
     observed = PROBLEM.observed(TRUTH, seed=4)
     mean, covariance = PROBLEM.exact_posterior(observed)

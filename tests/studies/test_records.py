@@ -39,6 +39,10 @@ def test_calibrate_then_leak_on_the_shipped_example_log(tmp_path, capsys):
         summary["charge"]["low_kg"] <= summary["charge"]["mean_kg"] <= summary["charge"]["high_kg"]
     )
     assert summary["n_simulations"] > 0
+    # the tempering starts where every fault is as likely as not, not from the healthy spike
+    stats = xr.open_datatree(later / "posterior.nc", engine="h5netcdf")["sample_stats"]
+    assert stats.attrs["tempered_from"] == "reference"
+    assert tree["sample_stats"].attrs["tempered_from"] == "prior"
 
     diagnosed = tmp_path / "diagnosed"
     code = main(["diagnose", log, "--prior", str(commissioning), "--budget", "smoke", "--out",

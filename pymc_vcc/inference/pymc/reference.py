@@ -1,7 +1,8 @@
 """The Gaussian mixture a tempered SMC starts from instead of the prior.
 
 :func:`~pymc_vcc.inference.pymc.laplace.fit_reference` makes one (Laplace approximations at the
-modes of a least-squares fit); ``sample_smc_abc(reference=...)``
+modes of a least-squares fit), :meth:`GaussianReference.of_mixture` another (a mixture prior
+broader than the one sampled, e.g. with its faults likelier); ``sample_smc_abc(reference=...)``
 (:class:`~pymc_vcc.inference.pymc.smc.ParallelKernel`) draws its initial particles from it and
 tempers from its density to the posterior.
 """
@@ -18,17 +19,19 @@ import numpy as np
 from scipy.special import logsumexp
 
 from pymc_vcc.execution.output_folder import atomic_path
+from pymc_vcc.inference.priors import GMMPrior
 
 
 @dataclass(frozen=True)
 class GaussianReference:
-    """An equal-weight mixture of Gaussians over the model's value space (the flat vector of its
-    free variables' unconstrained values, in ``model.value_vars`` order), one per mode found,
+    """A mixture of Gaussians over the model's value space (the flat vector of its free
+    variables' unconstrained values, in ``model.value_vars`` order), e.g. one per mode found,
     and what finding them cost.
 
     Attributes:
         means, covariances: of the components, (K, d) and (K, d, d); one component may be
             given as (d,) and (d, d).
+        weights: of the components, (K,) summing to 1 (default: equal).
         simulations, failed_simulations: simulations the fit ran, and how many failed.
         iterations: least-squares iterations over all starts.
         costs: ½ Σ w² of the whitened residuals at each component's fit.
@@ -40,6 +43,7 @@ class GaussianReference:
     failed_simulations: int = 0
     iterations: int = 0
     costs: tuple[float, ...] = ()
+    weights: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         means = np.atleast_2d(np.asarray(self.means, dtype=float))
@@ -52,18 +56,32 @@ class GaussianReference:
                 f"covariances must be {k} finite {d} x {d} matrices for {k} mean(s) of {d} "
                 f"values, got shape {covariances.shape}"
             )
+        weights = np.full(k, 1.0 / k) if self.weights is None else np.asarray(self.weights, float)
+        if weights.shape != (k,) or (weights < 0).any() or not np.isclose(weights.sum(), 1.0):
+            raise ValueError(f"weights must be {k} non-negative numbers summing to 1")
         object.__setattr__(self, "means", means)
         object.__setattr__(self, "covariances", covariances)
+        object.__setattr__(self, "weights", weights)
         object.__setattr__(self, "costs", tuple(float(c) for c in self.costs))
         np.linalg.cholesky(covariances)  # positive definite, or LinAlgError here
+
+    @classmethod
+    def of_mixture(cls, prior: GMMPrior) -> GaussianReference:
+        """The mixture ``prior`` itself over the value space of
+        :func:`~pymc_vcc.inference.pymc.model.gmm_prior_variable` (the logit space of its
+        bounds, where it is Gaussian): for a model whose only free variable is such a prior."""
+        return cls(prior.means, prior.covariances, weights=prior.weights)
 
     @cached_property
     def _factors(self) -> np.ndarray:
         return np.linalg.cholesky(self.covariances)
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """``n`` draws, (n, dimension), each component drawn with equal probability."""
-        component = rng.integers(len(self.means), size=n)
+        """``n`` draws, (n, dimension), each component drawn with its weight's probability."""
+        if np.allclose(self.weights, self.weights[0]):  # the draws of equal weights as before
+            component = rng.integers(len(self.means), size=n)
+        else:
+            component = rng.choice(len(self.means), size=n, p=self.weights)
         noise = rng.standard_normal(self.means[component].shape)
         return self.means[component] + np.einsum("nij,nj->ni", self._factors[component], noise)
 
@@ -77,16 +95,21 @@ class GaussianReference:
             per_component.append(
                 -0.5 * (np.sum(whitened**2, axis=0) + log_det + mean.size * np.log(2 * np.pi))
             )
-        return logsumexp(per_component, axis=0) - np.log(len(self.means))
+        return logsumexp(per_component, axis=0, b=self.weights[:, np.newaxis])
 
     def digest(self) -> str:
-        """Digest of the mean and covariance (a checkpoint names the reference it sampled)."""
-        return hashlib.sha256(self.means.tobytes() + self.covariances.tobytes()).hexdigest()
+        """Digest of the components (a checkpoint names the reference it sampled); equal weights
+        leave it as it was before the weights existed."""
+        parts = self.means.tobytes() + self.covariances.tobytes()
+        if not np.allclose(self.weights, self.weights[0]):
+            parts += self.weights.tobytes()
+        return hashlib.sha256(parts).hexdigest()
 
     def save(self, path: str | Path, fingerprint: str) -> None:
         """Write as JSON (atomically), with the ``fingerprint`` of the fit that made it."""
         payload = {**asdict(self), "fingerprint": fingerprint}
-        payload["means"], payload["covariances"] = self.means.tolist(), self.covariances.tolist()
+        for name in ("means", "covariances", "weights"):
+            payload[name] = getattr(self, name).tolist()
         with atomic_path(path) as temporary:
             temporary.write_text(json.dumps(payload))
 

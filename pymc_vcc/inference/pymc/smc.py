@@ -403,6 +403,7 @@ class ParallelKernel:
             "median_log_likelihood": float(np.median(self._data_loglik())),
             "max_steps": self.max_steps or 0,  # 0: no cap
             "max_simulations": self.max_simulations or 0,
+            "tempered_from": "prior" if self.reference is None else "reference",
             "executor": repr(self.executor),
         }
 
@@ -563,7 +564,8 @@ def sample_smc_abc(
             proposals, PyMC's default) or ``"mh"`` (random-walk steps).
         reference: temper from this Gaussian mixture instead of the prior (see
             :class:`ParallelKernel`; :func:`~pymc_vcc.inference.pymc.laplace.fit_reference`
-            makes one for an exact likelihood).
+            makes one for an exact likelihood, ``GaussianReference.of_mixture`` one of a
+            broader mixture prior); it must span the model's value space.
         progressbar: show PyMC's progress bar.
         **kwargs: other ``pm.sample_smc`` arguments (``start``, ``idata_kwargs``, ...).
 
@@ -586,6 +588,12 @@ def sample_smc_abc(
     check_kernel(kernel)
     kwargs.setdefault("compute_convergence_checks", chains > 1)
     model = modelcontext(model)
+    n_parameters = sum(model.initial_point()[v.name].size for v in model.value_vars)
+    if reference is not None and reference.means.shape[1] != n_parameters:
+        raise ValueError(
+            f"reference over {reference.means.shape[1]} values; the model's value space has "
+            f"{n_parameters}"
+        )
     store = None
     if checkpoint is not None:
         if random_seed is not None and (
@@ -610,7 +618,6 @@ def sample_smc_abc(
         )
         store = LikelihoodStore(checkpoint, settings, random_seed)
         random_seed = store.entropy
-    n_parameters = sum(model.initial_point()[v.name].size for v in model.value_vars)
     if draws < n_parameters:
         warnings.warn(
             f"draws={draws} particles for {n_parameters} parameters: a population smaller than "
