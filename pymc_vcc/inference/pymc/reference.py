@@ -73,12 +73,17 @@ class GaussianReference:
         return cls(prior.means, prior.covariances, weights=prior.weights)
 
     @cached_property
+    def _equal_weights(self) -> bool:
+        """Equal weights: drawn and digested as before the weights existed."""
+        return bool(np.allclose(self.weights, 1.0 / len(self.means)))
+
+    @cached_property
     def _factors(self) -> np.ndarray:
         return np.linalg.cholesky(self.covariances)
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` draws, (n, dimension), each component drawn with its weight's probability."""
-        if np.allclose(self.weights, self.weights[0]):  # the draws of equal weights as before
+        if self._equal_weights:
             component = rng.integers(len(self.means), size=n)
         else:
             component = rng.choice(len(self.means), size=n, p=self.weights)
@@ -98,10 +103,9 @@ class GaussianReference:
         return logsumexp(per_component, axis=0, b=self.weights[:, np.newaxis])
 
     def digest(self) -> str:
-        """Digest of the components (a checkpoint names the reference it sampled); equal weights
-        leave it as it was before the weights existed."""
+        """Digest of the components (a checkpoint names the reference it sampled)."""
         parts = self.means.tobytes() + self.covariances.tobytes()
-        if not np.allclose(self.weights, self.weights[0]):
+        if not self._equal_weights:
             parts += self.weights.tobytes()
         return hashlib.sha256(parts).hexdigest()
 
