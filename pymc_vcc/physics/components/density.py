@@ -36,13 +36,17 @@ FILLET_ENDS = 9
 enthalpy and width (J/kg), and ρ, ∂ρ/∂t, ∂²ρ/∂t² at both band edges, t = (h - start)/width.
 The memo's second row holds the derivative of each in p (the first of them dp/dp = 1)."""
 
+FILLET_MEMO_SHAPE = (2, 2, FILLET_ENDS)
+"""A :func:`fillet_memo`'s shape: saturation line (bubble, dew), the ends or their slopes in p,
+the ends' numbers. Empty, it is NaN."""
+
 
 @njit(cache=True, error_model="numpy")
 def fillet_memo() -> np.ndarray:
     """An empty memo for :func:`cell_state`: for each saturation line (bubble, dew) the fillet
     ends at one pressure and their derivatives in p. The ends depend on the pressure alone, so
     all cells of a zone share them; a memo is valid for one set of tables."""
-    return np.full((2, 2, FILLET_ENDS), np.nan)
+    return np.full(FILLET_MEMO_SHAPE, np.nan)
 
 
 @njit(cache=True, error_model="numpy")

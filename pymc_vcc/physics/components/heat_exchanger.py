@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit
 
 from pymc_vcc.physics.components.smooth import upwind_weight
+from pymc_vcc.physics.scratch import stack_empty
 
 
 @njit(cache=True, error_model="numpy")
@@ -66,7 +67,7 @@ def zone_derivatives(
     affine solve repeated once with them, a fixed two-pass scheme (so the result is a smooth
     function of the state). Total mass is conserved exactly: Σ V dρ/dt = inflow - outflow.
     """
-    beta = np.empty(h.size)  # dh_dt holds the alphas
+    beta = stack_empty(h.size)  # dh_dt holds the alphas
     a_out, b_out = _sweep(
         volume, rho, drho_dp, drho_dh, h, source, inflow, 0.0, flow_eps, dh_dt, beta
     )

@@ -29,10 +29,11 @@ import numpy as np
 from numba import njit
 from scipy.optimize import brentq
 
-from pymc_vcc.physics.components.density import cell_state, cell_values, fillet_memo
+from pymc_vcc.physics.components.density import FILLET_MEMO_SHAPE, cell_state, cell_values
 from pymc_vcc.physics.parameters import ParameterIds, ParameterTable, declared_table
 from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
+from pymc_vcc.physics.scratch import stack_empty
 
 N_PROPERTIES = 5
 """Rows of a cell-property array: T (K), ρ (kg/m³), ∂ρ/∂p, ∂ρ/∂h, quality."""
@@ -438,7 +439,8 @@ def zone_cells(y, zones, first, last, tables, props, memo=None, rates=True):
     p = y[p_index]
     sat = saturation_point(tables, p)
     if memo is None:
-        memo = fillet_memo()
+        memo = stack_empty(FILLET_MEMO_SHAPE)
+        memo[:] = np.nan
     for i in range(first, last + 1):
         h = y[p_index + 1 + k + i - first]
         if rates:

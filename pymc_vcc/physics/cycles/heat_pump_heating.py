@@ -62,7 +62,9 @@ def total_mass(y, constants, tables):
     c = constants[0]
     props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
     cell_properties(y, c.layout.zones, tables, props, False)
-    return stored_mass(cell_volumes(c), props[1])
+    volumes = np.empty(props.shape[1])
+    cell_volumes(c, volumes)
+    return stored_mass(volumes, props[1])
 
 
 @njit(cache=True, error_model="numpy")

@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit
 
 from pymc_vcc.physics.components.compressor import compressor, protection_speed_factor
-from pymc_vcc.physics.components.density import fillet_memo
+from pymc_vcc.physics.components.density import FILLET_MEMO_SHAPE
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature
 from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
@@ -81,6 +81,7 @@ from pymc_vcc.physics.refrigerant import (
     state_at,
     state_values_at,
 )
+from pymc_vcc.physics.scratch import borrowed, stack_empty
 
 U = INPUTS.offsets
 """Where each input sits in ``u`` (``u[U.T_ambient]``), constants to Numba."""
@@ -102,12 +103,12 @@ def hot_gas_line(at):
 
 
 @njit(cache=True, error_model="numpy")
-def cell_volumes(c):
-    """Volume of every cell (numbered zone after zone, in flow order), m³."""
+def cell_volumes(c, volumes):
+    """Write the volume of every cell (numbered zone after zone, in flow order) into
+    ``volumes``, m³."""
     at = c.layout
     n = at.h_liquid_line - at.h_cond
     first = 1 if hot_gas_line(at) else 0  # the condenser's first cell in the high-side zone
-    volumes = np.empty(2 * n + 3)
     if first:
         volumes[0] = c.vapor_line.volume
     volumes[first : first + n] = c.condenser.cell_volume
@@ -116,7 +117,6 @@ def cell_volumes(c):
     if not first:
         volumes[2 * n + 1] = c.vapor_line.volume
     volumes[2 * n + 2] = c.tank.volume
-    return volumes
 
 
 @njit(cache=True, error_model="numpy")
@@ -125,8 +125,9 @@ def evaluate(y, u, constants, tables, dydt, out):
     compressor speed Hz, T_ambient K, T_indoor K, indoor relative humidity); see
     :class:`~.base.CycleModel`. With RH > 0 an evaporating indoor coil condenses water where its
     wall is below the dew point: that latent heat adds to the wall's load."""
+    y, u, constants, tables, dydt, out = borrowed((y, u, constants, tables, dydt, out))
     c = constants[0]
-    props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
+    props = stack_empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
     cell_properties(y, c.layout.zones, tables, props)
     return balances(y, u, c, tables, props, dydt, out)
 
@@ -198,7 +199,9 @@ def cell_sums(c, props):
     n = at.h_liquid_line - at.h_cond
     first = 1 if hot_gas_line(at) else 0
     nc = at.zones[0, 1]
-    mass = stored_mass(cell_volumes(c), props[1])
+    volumes = stack_empty(props.shape[1])
+    cell_volumes(c, volumes)
+    mass = stored_mass(volumes, props[1])
     # homogeneous friction along a coil goes with its mean specific volume
     return (
         mass,
@@ -329,8 +332,10 @@ def coil_rates(y, u, c, tables, props, flow, dydt, memo, remember):
     T_air_e = air_inlet_temperature(
         T_amb if heating else T_ind, evap.fan_power, n * evap.air_capacity
     )
-    src_c = np.zeros(nc)
-    src_e = np.zeros(ne)
+    src_c = stack_empty(nc)
+    src_e = stack_empty(ne)
+    src_c[:] = 0.0
+    src_e[:] = 0.0
     q_cond = 0.0
     q_evap = 0.0
     q_sensible = 0.0
@@ -403,7 +408,8 @@ def zone_rates(y, c, props, flow, src_c, src_e, dydt):
     ne = at.zones[1, 1]
     h_zc = y[at.p_cond + 1 : at.p_cond + 1 + nc]
     h_ze = y[at.p_evap + 1 : at.p_evap + 1 + ne]
-    volumes = cell_volumes(c)
+    volumes = stack_empty(nc + ne)
+    cell_volumes(c, volumes)
     m_comp, m_src, m_valve, h_d = flow.m_comp, flow.m_src, flow.m_valve, flow.h_d
     src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
     src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[nc - 1] - h_ze[0])
@@ -549,25 +555,31 @@ def jacobian(y, u, constants, tables, f0):
     differenced with the flows held, one column of each side in one evaluation (their rows do
     not overlap), and the sums' part is added as ``∂f/∂s Δs``: ∂f/∂s by three evaluations with
     one sum moved, Δs from the column's own cells."""
+    y, u, constants, tables, f0 = borrowed((y, u, constants, tables, f0))
     c = constants[0]
     at = c.layout
     zones = at.zones
     n = at.h_liquid_line - at.h_cond
     jac = np.zeros((y.size, y.size))
-    props = np.empty((N_PROPERTIES, zones[:, 1].sum()))
+    props = stack_empty((N_PROPERTIES, zones[:, 1].sum()))
     cell_properties(y, zones, tables, props)
-    saved = props.copy()
-    work = y.copy()
-    dydt = np.empty(y.size)
-    memo = np.full((2 * n, MEMO_COLUMNS), np.nan)
+    saved = stack_empty(props.shape)
+    saved[:] = props
+    work = stack_empty(y.size)
+    work[:] = y
+    dydt = stack_empty(y.size)
+    memo = stack_empty((2 * n, MEMO_COLUMNS))
+    memo[:] = np.nan
     # enthalpy columns keep their zone's pressure and its fillet ends: one memo per zone
-    fillets = (fillet_memo(), fillet_memo())
+    # and a third for each coupled column
+    fillets = stack_empty((3, *FILLET_MEMO_SHAPE))
+    fillets[:] = np.nan
     sums = cell_sums(c, props)
     held = flows(y, u, c, tables, props, sums)
     held_rates(y, u, c, tables, props, held, dydt, memo, True)  # the cells' heats at y
 
     # how f answers each sum, through the flows
-    through_sums = np.empty((N_SUMS, y.size))
+    through_sums = stack_empty((N_SUMS, y.size))
     for k in range(N_SUMS):
         moved = np.array(sums)
         step = 1e-7 * abs(moved[k])
@@ -579,7 +591,8 @@ def jacobian(y, u, constants, tables, f0):
 
     coupled = coupled_columns(at)
     for j in coupled:
-        step = perturb(y, work, j, zones, tables, props, fillet_memo())
+        fillets[2] = np.nan
+        step = perturb(y, work, j, zones, tables, props, fillets[2])
         flow = flows(work, u, c, tables, props, cell_sums(c, props))
         held_rates(work, u, c, tables, props, flow, dydt, memo, False)
         for i in range(y.size):
@@ -588,9 +601,11 @@ def jacobian(y, u, constants, tables, f0):
 
     sides = (side_columns(at, coupled, 0, at.Tw_cond), side_columns(at, coupled, 1, at.Tw_evap))
     walls = (at.Tw_cond, at.Tw_evap)
+    steps = stack_empty(2)
+    shifts = stack_empty((2, N_SUMS))
     for m in range(max(sides[0].size, sides[1].size)):
-        steps = np.zeros(2)
-        shifts = np.zeros((2, N_SUMS))
+        steps[:] = 0.0
+        shifts[:] = 0.0
         before = sums  # the mass adds up, each friction density reads one side: Δs separate
         for side in range(2):
             if m < sides[side].size:
@@ -622,11 +637,12 @@ def jacobian(y, u, constants, tables, f0):
 def outputs_along(ys, us, constants, tables, rates):
     """Outputs and diagnostics at each row of states ``ys`` with the matching inputs ``us``;
     with ``rates`` False the heats are NaN (see :func:`balances`), at half the cost."""
+    ys, us, constants, tables = borrowed((ys, us, constants, tables))
     c = constants[0]
-    props = np.empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
+    props = stack_empty((N_PROPERTIES, c.layout.zones[:, 1].sum()))
     result = np.empty((ys.shape[0], N_EVAL))
-    dydt = np.empty(ys.shape[1])
-    out = np.empty(N_EVAL)
+    dydt = stack_empty(ys.shape[1])
+    out = stack_empty(N_EVAL)
     for k in range(ys.shape[0]):
         cell_properties(ys[k], c.layout.zones, tables, props, rates)
         balances(ys[k], us[k], c, tables, props, dydt, out, rates)

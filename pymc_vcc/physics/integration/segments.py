@@ -30,7 +30,7 @@ from scipy.linalg import get_lapack_funcs
 from pymc_vcc.physics.failures import Failure, FailureKind
 from pymc_vcc.physics.integration import sundials
 from pymc_vcc.physics.integration.solver import Solver
-from pymc_vcc.physics.integration.stops import segment_stops, stop_plan
+from pymc_vcc.physics.integration.stops import StopPlan, segment_stops, stop_plan
 
 CVODE_MAX_ORDER = 3
 """Highest BDF order. With orders 4 and 5 (CVODE's default) the onset of a fast transient that
@@ -291,6 +291,7 @@ class CvodeSolver:
         self._settings = (rtol, atol, max_step)
         self._cvode: sundials.Cvode | None = None
         self._model: SegmentModel | None = None
+        self._stops: tuple[tuple, StopPlan] | None = None
 
     def _instance(self, model: SegmentModel) -> sundials.Cvode:
         """The CVODE instance for ``model`` (one holds the model's callbacks)."""
@@ -301,9 +302,17 @@ class CvodeSolver:
             self._cvode.configure(CVODE_MAX_ORDER, self.MAX_STEPS, self.MIN_STEP, max_step)
         return self._cvode
 
+    def _plan(self, model: SegmentModel, edges, held, times) -> StopPlan:
+        """The :class:`StopPlan` of these segments and output times for ``model``: the last
+        run's when they are the same (a simulator's runs share them)."""
+        key = tuple((a.shape, np.ascontiguousarray(a).tobytes()) for a in (edges, held, times))
+        if self._stops is None or self._stops[0] != key or self._stops[1].u is not model.u:
+            self._stops = key, stop_plan(edges, held, times, model.u)
+        return self._stops[1]
+
     def integrate_segments(self, model, y0, edges, held, times, states, deadline):
         cvode = self._instance(model)
-        plan = stop_plan(edges, held, times, model.u)
+        plan = self._plan(model, edges, held, times)
         done, flag, finite, late = cvode.run(y0, plan, states, deadline)
         n_steps, n_rhs, n_jac = cvode.statistics()
         self.counters.n_steps += n_steps
