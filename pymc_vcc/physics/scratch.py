@@ -4,8 +4,8 @@ Numba counts the references to every array that owns its memory, with an atomic 
 each time a compiled function takes one in or lets it go. The cycle's kernels pass their cell
 properties and scratch arrays through many small functions: on a nominal CVODE run those counts
 took 29 % of the time (sampled by perf). An array that owns nothing has its counts skipped: the
-kernels keep their scratch arrays on the stack (:func:`stack_empty`) and look at what a caller
-passes in through views that own nothing (:func:`borrowed`).
+kernels keep their scratch arrays on the stack (:func:`stack_empty`, :func:`stack_full`) and
+look at what a caller passes in through views that own nothing (:func:`borrowed`).
 """
 
 from __future__ import annotations
@@ -63,43 +63,69 @@ def _borrowed(typingctx, value):
     return value(value), codegen
 
 
+def _stack_array_type(shape):
+    """The array type of a stack array of ``shape``'s type (an int or a tuple of ints), or None."""
+    if isinstance(shape, types.Integer):
+        return types.Array(types.float64, 1, "C")
+    if isinstance(shape, types.UniTuple) and isinstance(shape.dtype, types.Integer):
+        return types.Array(types.float64, shape.count, "C")
+    return None
+
+
+def _stack_array(context, builder, array_type, shape_type, shape, fill=None):
+    """A C-ordered float64 array of ``shape`` on the stack, each element ``fill`` (a double) if
+    given."""
+    intp = types.intp
+    if isinstance(shape_type, types.Integer):
+        dims = [context.cast(builder, shape, shape_type, intp)]
+    else:
+        dims = [
+            context.cast(builder, dim, shape_type.dtype, intp)
+            for dim in cgutils.unpack_tuple(builder, shape, shape_type.count)
+        ]
+    itemsize = context.get_constant(intp, 8)
+    strides = [itemsize]
+    for dim in reversed(dims[1:]):
+        strides.insert(0, builder.mul(strides[0], dim))
+    count = dims[0]
+    for dim in dims[1:]:
+        count = builder.mul(count, dim)
+    data = builder.alloca(ir.DoubleType(), size=count)
+    if fill is not None:
+        with cgutils.for_range(builder, count) as loop:
+            builder.store(fill, builder.gep(data, [loop.index]))
+    array = context.make_array(array_type)(context, builder)
+    populate_array(array, data=data, shape=dims, strides=strides, itemsize=itemsize, meminfo=None)
+    return array._getvalue()
+
+
 @intrinsic
 def _stack_empty(typingctx, shape):
     """An uninitialised C-ordered float64 array of ``shape`` (an int or a tuple of ints) on the
     stack of the function that calls this: it owns nothing and lives until that function
     returns. Never return it, and call this outside loops (each call takes new stack)."""
-    if isinstance(shape, types.Integer):
-        ndim = 1
-    elif isinstance(shape, types.UniTuple) and isinstance(shape.dtype, types.Integer):
-        ndim = shape.count
-    else:
+    array_type = _stack_array_type(shape)
+    if array_type is None:
         return None
-    array_type = types.Array(types.float64, ndim, "C")
 
     def codegen(context, builder, signature, args):
-        intp = types.intp
-        if isinstance(shape, types.Integer):
-            dims = [context.cast(builder, args[0], shape, intp)]
-        else:
-            dims = [
-                context.cast(builder, dim, shape.dtype, intp)
-                for dim in cgutils.unpack_tuple(builder, args[0], ndim)
-            ]
-        itemsize = context.get_constant(intp, 8)
-        strides = [itemsize]
-        for dim in reversed(dims[1:]):
-            strides.insert(0, builder.mul(strides[0], dim))
-        count = dims[0]
-        for dim in dims[1:]:
-            count = builder.mul(count, dim)
-        data = builder.alloca(ir.DoubleType(), size=count)
-        array = context.make_array(array_type)(context, builder)
-        populate_array(
-            array, data=data, shape=dims, strides=strides, itemsize=itemsize, meminfo=None
-        )
-        return array._getvalue()
+        return _stack_array(context, builder, array_type, shape, args[0])
 
     return array_type(shape), codegen
+
+
+@intrinsic
+def _stack_full(typingctx, shape, value):
+    """:func:`stack_empty` with every element ``value`` (a number)."""
+    array_type = _stack_array_type(shape)
+    if array_type is None or not isinstance(value, types.Number):
+        return None
+
+    def codegen(context, builder, signature, args):
+        fill = context.cast(builder, args[1], value, types.float64)
+        return _stack_array(context, builder, array_type, shape, args[0], fill)
+
+    return array_type(shape, value), codegen
 
 
 _T = TypeVar("_T")
@@ -107,3 +133,4 @@ _T = TypeVar("_T")
 # as compiled code calls them (an intrinsic's own signature starts with the typing context)
 borrowed = cast(Callable[[_T], _T], _borrowed)
 stack_empty = cast(Callable[[int | tuple[int, ...]], np.ndarray], _stack_empty)
+stack_full = cast(Callable[[int | tuple[int, ...], float], np.ndarray], _stack_full)

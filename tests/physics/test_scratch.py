@@ -7,7 +7,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from pymc_vcc.physics.scratch import borrowed, stack_empty
+from pymc_vcc.physics.scratch import borrowed, stack_empty, stack_full
 
 
 class _Pair(NamedTuple):
@@ -53,6 +53,20 @@ def test_a_stack_array_has_its_shape_and_c_order() -> None:
     assert total == sum(range(12))
     assert last_row == 8 + 9 + 10 + 11
     assert c_order
+
+
+@njit
+def _filled(rows, cols):
+    """A 2-D stack array of NaN and a 1-D one of an integer fill, as heap copies."""
+    return stack_full((rows, cols), np.nan).copy(), stack_full(cols, 3).copy()
+
+
+def test_a_full_stack_array_holds_its_value_everywhere() -> None:
+    grid, line = _filled(5, 7)
+    assert grid.shape == (5, 7)
+    assert np.isnan(grid).all()
+    assert line.dtype == np.float64
+    assert (line == 3.0).all()
 
 
 @njit

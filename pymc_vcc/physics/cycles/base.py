@@ -33,7 +33,7 @@ from pymc_vcc.physics.components.density import FILLET_MEMO_SHAPE, cell_state, c
 from pymc_vcc.physics.parameters import ParameterIds, ParameterTable, declared_table
 from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
-from pymc_vcc.physics.scratch import stack_empty
+from pymc_vcc.physics.scratch import stack_full
 
 N_PROPERTIES = 5
 """Rows of a cell-property array: T (K), ρ (kg/m³), ∂ρ/∂p, ∂ρ/∂h, quality."""
@@ -439,8 +439,7 @@ def zone_cells(y, zones, first, last, tables, props, memo=None, rates=True):
     p = y[p_index]
     sat = saturation_point(tables, p)
     if memo is None:
-        memo = stack_empty(FILLET_MEMO_SHAPE)
-        memo[:] = np.nan
+        memo = stack_full(FILLET_MEMO_SHAPE, np.nan)
     for i in range(first, last + 1):
         h = y[p_index + 1 + k + i - first]
         if rates:

@@ -81,7 +81,7 @@ from pymc_vcc.physics.refrigerant import (
     state_at,
     state_values_at,
 )
-from pymc_vcc.physics.scratch import borrowed, stack_empty
+from pymc_vcc.physics.scratch import borrowed, stack_empty, stack_full
 
 U = INPUTS.offsets
 """Where each input sits in ``u`` (``u[U.T_ambient]``), constants to Numba."""
@@ -332,10 +332,8 @@ def coil_rates(y, u, c, tables, props, flow, dydt, memo, remember):
     T_air_e = air_inlet_temperature(
         T_amb if heating else T_ind, evap.fan_power, n * evap.air_capacity
     )
-    src_c = stack_empty(nc)
-    src_e = stack_empty(ne)
-    src_c[:] = 0.0
-    src_e[:] = 0.0
+    src_c = stack_full(nc, 0.0)
+    src_e = stack_full(ne, 0.0)
     q_cond = 0.0
     q_evap = 0.0
     q_sensible = 0.0
@@ -568,12 +566,10 @@ def jacobian(y, u, constants, tables, f0):
     work = stack_empty(y.size)
     work[:] = y
     dydt = stack_empty(y.size)
-    memo = stack_empty((2 * n, MEMO_COLUMNS))
-    memo[:] = np.nan
+    memo = stack_full((2 * n, MEMO_COLUMNS), np.nan)
     # enthalpy columns keep their zone's pressure and its fillet ends: one memo per zone
     # and a third for each coupled column
-    fillets = stack_empty((3, *FILLET_MEMO_SHAPE))
-    fillets[:] = np.nan
+    fillets = stack_full((3, *FILLET_MEMO_SHAPE), np.nan)
     sums = cell_sums(c, props)
     held = flows(y, u, c, tables, props, sums)
     held_rates(y, u, c, tables, props, held, dydt, memo, True)  # the cells' heats at y
