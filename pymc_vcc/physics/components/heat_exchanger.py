@@ -17,13 +17,12 @@ one O(n) sweep carrying every quantity as an affine function a + b dp/dt.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from pymc_vcc.physics.components.smooth import upwind_weight
-from pymc_vcc.physics.scratch import stack_empty
+from pymc_vcc.physics.scratch import stack_empty, uncounted
 
 
-@njit(cache=True, error_model="numpy")
+@uncounted
 def _sweep(volume, rho, drho_dp, drho_dh, h, source, inflow, dp_guess, flow_eps, alpha, beta):
     """One sweep with the upwind weights at ``dp_guess``: each cell's dh/dt as
     ``alpha + beta dp/dt`` into ``alpha`` and ``beta``; returns the zone outflow as
@@ -47,7 +46,7 @@ def _sweep(volume, rho, drho_dp, drho_dh, h, source, inflow, dp_guess, flow_eps,
     return a_flow, b_flow
 
 
-@njit(cache=True, error_model="numpy")
+@uncounted
 def zone_derivatives(
     volume: np.ndarray,
     rho: np.ndarray,

@@ -33,7 +33,7 @@ from pymc_vcc.physics.components.density import FILLET_MEMO_SHAPE, cell_state, c
 from pymc_vcc.physics.parameters import ParameterIds, ParameterTable, declared_table
 from pymc_vcc.physics.records import make_record
 from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
-from pymc_vcc.physics.scratch import stack_full
+from pymc_vcc.physics.scratch import all_finite, stack_full, uncounted
 
 N_PROPERTIES = 5
 """Rows of a cell-property array: T (K), ρ (kg/m³), ∂ρ/∂p, ∂ρ/∂h, quality."""
@@ -423,7 +423,7 @@ def place_charge(
 # ---- Numba kernels that read only the layout ----------------------------------------------
 
 
-@njit(cache=True, error_model="numpy")
+@uncounted
 def zone_cells(y, zones, first, last, tables, props, memo=None, rates=True):
     """Properties of cells ``first`` to ``last`` (cells numbered zone after zone; all of one
     zone, so they share its pressure's saturation point) into those columns of ``props``. A
@@ -454,7 +454,7 @@ def zone_cells(y, zones, first, last, tables, props, memo=None, rates=True):
         props[4, i] = x
 
 
-@njit(cache=True, error_model="numpy")
+@uncounted
 def cell_properties(y, zones, tables, props, rates=True):
     """Fill ``props`` (shape (N_PROPERTIES, cells)) for every cell (``rates``: see
     :func:`zone_cells`); False if a property left the tables."""
@@ -462,7 +462,7 @@ def cell_properties(y, zones, tables, props, rates=True):
     for zone in range(zones.shape[0]):
         zone_cells(y, zones, first, first + zones[zone, 1] - 1, tables, props, None, rates)
         first += zones[zone, 1]
-    return bool(np.isfinite(props[1]).all())
+    return all_finite(props[1])
 
 
 @njit(cache=True, error_model="numpy")

@@ -81,7 +81,7 @@ from pymc_vcc.physics.refrigerant import (
     state_at,
     state_values_at,
 )
-from pymc_vcc.physics.scratch import borrowed, stack_empty, stack_full
+from pymc_vcc.physics.scratch import all_finite, borrowed, stack_empty, stack_full, uncounted
 
 U = INPUTS.offsets
 """Where each input sits in ``u`` (``u[U.T_ambient]``), constants to Numba."""
@@ -191,7 +191,7 @@ N_SUMS = 3
 coils' friction densities."""
 
 
-@njit(cache=True, error_model="numpy")
+@uncounted
 def cell_sums(c, props):
     """(total mass kg, condenser and evaporator friction densities kg/m³): the flows' only
     reach into the cells beyond each zone's first and last ones (:func:`flows`)."""
@@ -456,7 +456,7 @@ def rates(y, u, c, tables, props, flow, dydt, memo=None, remember=False):
     return q_cond, q_evap, q_sensible, q_latent
 
 
-@njit(cache=True, error_model="numpy")
+@uncounted
 def held_rates(y, u, c, tables, props, flow, dydt, memo, remember):
     """:func:`rates` with a memo, for :func:`jacobian`: one compiled copy of the rates (and of
     the coil heats inlined in them) that its evaluations share, where an inlined copy at each
@@ -504,7 +504,7 @@ def write_outputs(y, c, props, flow, q_cond, q_evap, q_sensible, q_latent, out):
     out[OUT.SHR] = 1.0 if heating else q_sensible / (q_sensible + q_latent)
 
 
-@njit(cache=True, error_model="numpy")
+@uncounted
 def balances(y, u, c, tables, props, dydt, out, rates_too=True):
     """:func:`evaluate` given the cell properties ``props`` of every cell; with ``rates_too``
     False the outputs alone (walls and zones skipped: ``dydt`` untouched, the heats NaN)."""
@@ -517,7 +517,7 @@ def balances(y, u, c, tables, props, dydt, out, rates_too=True):
     if rates_too:
         q_cond, q_evap, q_sensible, q_latent = rates(y, u, c, tables, props, flow, dydt)
     write_outputs(y, c, props, flow, q_cond, q_evap, q_sensible, q_latent, out)
-    return not rates_too or bool(np.isfinite(dydt).all())
+    return not rates_too or all_finite(dydt)
 
 
 @njit(cache=True, error_model="numpy")
