@@ -406,7 +406,7 @@ def zone_rates(y, c, props, flow, src_c, src_e, dydt):
     ne = at.zones[1, 1]
     h_zc = y[at.p_cond + 1 : at.p_cond + 1 + nc]
     h_ze = y[at.p_evap + 1 : at.p_evap + 1 + ne]
-    volumes = stack_empty(nc + ne)
+    volumes = stack_empty(props.shape[1])
     cell_volumes(c, volumes)
     m_comp, m_src, m_valve, h_d = flow.m_comp, flow.m_src, flow.m_valve, flow.h_d
     src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
