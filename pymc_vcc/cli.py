@@ -430,7 +430,8 @@ def _add_record_options(parser: argparse.ArgumentParser) -> None:
         choices=list(COILS),
         default="finer",
         help="whose coils made the log: finer (a physical unit, the default) or model (data "
-        "this model generated: no coil offset)",
+        "this model generated: no coil offset, and a first log's posterior refined under the "
+        "sensors' errors alone)",
     )
     parser.add_argument(
         "--columns",

@@ -193,12 +193,17 @@ class ErrorBudget:
         """Plateaus per output."""
         return len(self.windows)
 
+    def whitened(self, simulated: np.ndarray) -> np.ndarray:
+        """The residual of the observed summaries from a simulated (outputs, time) series,
+        whitened by the budget's covariance: independent standard normals under it."""
+        residual = self.observed - self.mean - summarise(simulated, self.windows)
+        return np.linalg.solve(self._cholesky, residual)
+
     def log_likelihood(self, simulated: np.ndarray) -> float:
         """log p(observed summaries | simulated (outputs, time) series); −inf if not finite."""
         if not np.isfinite(simulated).all():
             return -np.inf
-        residual = self.observed - self.mean - summarise(simulated, self.windows)
-        z = np.linalg.solve(self._cholesky, residual)
+        z = self.whitened(simulated)
         return float(-0.5 * (z @ z + self._log_det + z.size * np.log(2 * np.pi)))
 
     def distance(self, sims: np.ndarray, obs: np.ndarray) -> np.ndarray:

@@ -297,6 +297,11 @@ class SensorBudget:
         """Standard deviation of each summary from the sensors alone (SI)."""
         return np.sqrt(np.diag(sum(self.parts.values())))
 
+    def budget(self) -> ErrorBudget:
+        """The error budget of a record the model itself made: the sensors' errors alone."""
+        zero = np.zeros_like(self.observed)
+        return ErrorBudget(self.outputs, self.windows, self.observed, zero, dict(self.parts))
+
 
 def error_budget(
     model: VCCSimulator,

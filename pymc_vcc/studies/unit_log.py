@@ -41,6 +41,7 @@ from pymc_vcc.inference.error_model import (
     summarise,
 )
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
+from pymc_vcc.inference.pymc.laplace import fit_reference
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.reference import GaussianReference
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
@@ -106,6 +107,9 @@ REJECTION_MAIN = 30  # main-phase draws per SMC particle (about 5 % accepted)
 REJECTION_QUANTILE = 0.05
 
 PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
+EXACT_SHARE = 0.3
+"""Share of the simulations of a record the model itself made (``coils`` ``model``) kept for
+its exact stage: the fit and the SMC under the sensors' errors alone."""
 SIMULATIONS_PER_PARTICLE = 52  # a calibration's default simulation cap per SMC particle
 PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in sample_stats
 
@@ -206,7 +210,10 @@ def calibrate_record(
         coils: whose coils made the record
             (:data:`~pymc_vcc.studies.record_budget.COILS`): ``finer`` for a physical unit
             (the default: every real unit), ``model`` for data the model itself generated
-            (then no coil offset, and the model-error draws keep the model's coils).
+            (then no coil offset, and the model-error draws keep the model's coils; and for
+            a first record sampled by ``likelihood``, the posterior under the model's error
+            is only the start of an exact stage under the sensors' errors alone, with
+            :data:`EXACT_SHARE` of the simulations: :func:`_sample_exact`).
         method: the sampler under the error budget (:data:`METHODS`); ``draws`` sets the
             rejection's budget too (:data:`REJECTION_PILOT`, :data:`REJECTION_MAIN` per
             particle).
@@ -219,8 +226,9 @@ def calibrate_record(
         :class:`~pymc_vcc.studies.record_budget.CoilOffset`, measured first:
         ``coil_offset_kg`` in ``sample_stats``). ``sample_stats`` also holds the predictive
         check per output (``ppc_z_mean``, ``ppc_p_value``, ``ppc_misfit``), the last error
-        budget's size (``error_draws``, ``error_failed``, ``error_rounds``) and every
-        simulation's count (``n_simulations``).
+        budget's size (``error_draws``, ``error_failed``, ``error_rounds``), the exact stage's
+        simulations (``exact_simulations``, 0 without one) and every simulation's count
+        (``n_simulations``).
     """
     unit = load_unit() if unit is None else unit
     error_prior = None
@@ -236,6 +244,8 @@ def calibrate_record(
     check_method(method)
     if max_simulations is None:
         max_simulations = SIMULATIONS_PER_PARTICLE * draws
+    exact = coils == "model" and commissioning is None and method == "likelihood"
+    exact_reserve = round(EXACT_SHARE * max_simulations) if exact else 0
     rng = np.random.default_rng(seed)
     t_end = float(observed["time"].values[-1])
     model = VCCSimulator(
@@ -282,7 +292,8 @@ def calibrate_record(
         )
         simulations += _error_runs(n_error, coils, commissioned)
         particles = max(MIN_PARTICLES, round(share * draws))
-        to_come = PREDICTIVE_DRAWS + round_left * _error_runs(error_draws, coils, commissioned)
+        to_come = PREDICTIVE_DRAWS + exact_reserve
+        to_come += round_left * _error_runs(error_draws, coils, commissioned)
         affordable = share * (max_simulations - simulations - to_come)
         tree, n_sampled = _sample(
             method,
@@ -299,12 +310,20 @@ def calibrate_record(
         )
         simulations += n_sampled
         thetas = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
-    check, n_check = _predictive_check(tree, model, budget, executor, rng)
+    checked, n_exact = budget, 0
+    if exact:
+        checked = SensorBudget.of(model, observed, accuracy).budget()
+        affordable = max_simulations - simulations - PREDICTIVE_DRAWS
+        tree, n_exact = _sample_exact(
+            model, observed, checked, prior, tree, particles, affordable, executor, seed
+        )
+        simulations += n_exact
+    check, n_check = _predictive_check(tree, model, checked, executor, rng)
     stats = tree["sample_stats"].to_dataset()
-    coords = {"output": list(budget.outputs)}
+    coords = {"output": list(checked.outputs)}
     for key in PPC_KEYS:
         stats[f"ppc_{key}"] = xr.DataArray(
-            [check[name][key] for name in budget.outputs], dims="output", coords=coords
+            [check[name][key] for name in checked.outputs], dims="output", coords=coords
         )
     if offset is not None:
         _to_unit_charge(tree, offset, rng)
@@ -314,10 +333,11 @@ def calibrate_record(
     stats["error_draws"] = budget.n_draws
     stats["error_failed"] = budget.n_failed
     stats["error_rounds"] = rounds
+    stats["exact_simulations"] = n_exact
     stats["n_simulations"] = simulations + n_check
     tree["sample_stats"] = xr.DataTree(stats)
     tree["constant_data"] = xr.DataTree(inputs)
-    misfit = [name for name in budget.outputs if check[name]["misfit"]]
+    misfit = [name for name in checked.outputs if check[name]["misfit"]]
     if misfit:
         warnings.warn(
             "the model cannot reproduce "
@@ -423,6 +443,41 @@ def _sample(
         )
     stats = tree["sample_stats"]
     return tree, int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
+
+
+def _sample_exact(
+    model: VCCSimulator,
+    observed: xr.Dataset,
+    budget: ErrorBudget,
+    prior: Prior,
+    start: xr.DataTree,
+    particles: int,
+    max_simulations: int,
+    executor: Executor,
+    seed: int,
+) -> tuple[xr.DataTree, int]:
+    """The posterior of a record the model itself made, under ``budget`` (the sensors' errors
+    alone), and its simulations: a least-squares fit from the mean of the ``start`` posterior
+    (the calibration under the model's error), then SMC tempered from the fit's Laplace
+    approximation (:func:`~pymc_vcc.inference.pymc.laplace.fit_reference`). Tempered from the
+    prior, so sharp a likelihood in ten parameters collapsed 96 particles onto wrong modes."""
+    run = RunOptions(executor=executor, seed=seed)
+    with pm.Model() as pymc_model:
+        add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
+        for name in prior.names:
+            pymc_model.set_initval(pymc_model[name], float(start["posterior"][name].mean()))
+        reference = fit_reference(max_simulations=max_simulations // 2, run=run)
+        tree = sample_smc_abc(
+            particles,
+            executor=executor,
+            random_seed=seed,
+            progressbar=False,
+            max_simulations=max(1, max_simulations - reference.simulations),
+            reference=reference,
+        )
+    stats = tree["sample_stats"]
+    sampled = int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
+    return tree, reference.simulations + sampled
 
 
 def _to_unit_charge(tree: xr.DataTree, offset: CoilOffset, rng: np.random.Generator) -> None:

@@ -8,6 +8,7 @@ import pymc as pm
 import pytest
 
 from pymc_vcc.execution.options import RunOptions
+from pymc_vcc.inference.error_model import ErrorBudget, summarise
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.pymc.laplace import fit_reference
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
@@ -149,6 +150,33 @@ def test_smc_from_the_fit_gives_the_exact_posterior_with_fewer_simulations(quiet
         0.5 * np.sum(((observed["TD"].values - PROBLEM.design @ mean) / 0.3) ** 2), rel=1e-3
     )
     assert runs["fit"][1] < 0.5 * runs["prior"][1], {k: v[1] for k, v in runs.items()}
+
+
+def test_an_error_budgets_summaries_are_fitted_and_sampled_exactly(quiet_pymc):
+    """Under an error budget the fit reads the whitened residuals of the summaries: the budget
+    of four window means with a known covariance makes a linear-Gaussian posterior, which the
+    SMC from the fit reproduces."""
+    observed = PROBLEM.observed(TRUTH, seed=6)
+    windows = np.array_split(np.arange(PROBLEM.n_time), 4)
+    means = np.array([PROBLEM.design[w].mean(axis=0) for w in windows])  # summaries = means @ β
+    variance = np.array([NOISE.temperature**2 / w.size for w in windows])
+    summaries = summarise(observed["TD"].values[np.newaxis], windows)
+    budget = ErrorBudget(("TD",), windows, summaries, np.zeros(4), {"noise": np.diag(variance)})
+    precision = means.T @ (means / variance[:, np.newaxis])
+    covariance = np.linalg.inv(precision)
+    mean = covariance @ means.T @ (summaries / variance)
+    with pm.Model():
+        add_likelihood("y", PROBLEM, observed, error_budget=budget)
+        reference = fit_reference(run=RunOptions(executor="serial", seed=0))
+        tree = sample_smc_abc(
+            600, executor="serial", random_seed=1, reference=reference, progressbar=False
+        )
+    draws = np.column_stack([tree["posterior"][n].values.ravel() for n in PROBLEM.parameter_names])
+    sd = np.sqrt(np.diag(covariance))
+    assert np.all(np.abs((draws.mean(axis=0) - mean) / sd) < 0.15)
+    assert np.all(np.abs(draws.std(axis=0) / sd - 1) < 0.12)
+    residual = summaries - means @ mean
+    assert reference.costs[0] == pytest.approx(0.5 * np.sum(residual**2 / variance), rel=1e-2)
 
 
 def test_a_saved_fit_is_reused_only_for_the_same_data(quiet_pymc, tmp_path):

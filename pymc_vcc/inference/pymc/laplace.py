@@ -5,13 +5,13 @@ Tempered SMC from the prior needs many stages when the likelihood is sharp in ma
 halves the effective sample size. Instead,
 
 1. :func:`fit_reference` fits the parameters by nonlinear least squares on the whitened
-   residuals of every exact-likelihood node (scipy's trust-region reflective
-   ``least_squares``) from one or more starts, over ``place = sigmoid(value)`` in the unit box,
-   ``value`` being the model's value space (the unconstrained coordinates of its free
-   variables; for the box priors here, ``place`` is each parameter's place in its box), with
-   forward-difference Jacobians whose simulations run as one parallel batch through an
-   executor. (In the value space itself the fit strays to the box edges, where the logit
-   flattens every slope, and stalls there.)
+   residuals of every exact-likelihood node (under sensor noise or an error budget; scipy's
+   trust-region reflective ``least_squares``) from one or more starts, over
+   ``place = sigmoid(value)`` in the unit box, ``value`` being the model's value space (the
+   unconstrained coordinates of its free variables; for the box priors here, ``place`` is
+   each parameter's place in its box), with forward-difference Jacobians whose simulations
+   run as one parallel batch through an executor. (In the value space itself the fit strays
+   to the box edges, where the logit flattens every slope, and stalls there.)
 2. At each fit, the Laplace approximation (covariance ``(JᵀJ + P)⁻¹``, ``P`` the prior's
    negative Hessian there) is corrected along its principal axes by secants at ±2 sds, where
    the solver's own error no longer swamps weak directions, and widened by ``inflation``.
@@ -50,9 +50,8 @@ from scipy.stats import chi2
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.outcomes import SimulationOutcome
-from pymc_vcc.inference.likelihood import innovations
 from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest
-from pymc_vcc.inference.pymc.likelihood import LogLikelihoodKernel
+from pymc_vcc.inference.pymc.likelihood import LogLikelihoodKernel, SummaryLikelihoodKernel
 from pymc_vcc.inference.pymc.reference import GaussianReference
 
 FIT_BOUND = 10.0
@@ -63,6 +62,9 @@ AXIS_ROUNDS = 2
 
 AXIS_REACH = 2.0
 """How far :func:`_along_axes` probes each principal axis, in its sds."""
+
+EXACT_KERNELS = (LogLikelihoodKernel, SummaryLikelihoodKernel)
+"""The likelihood nodes whose whitened residuals a fit can read (``residuals``)."""
 
 FAILED_RESIDUAL = 1e3
 """Whitened residual given to every entry of a failed simulation: the fit steps back from it."""
@@ -75,23 +77,22 @@ class _Residuals:
     def __init__(self, model: Model, executor: Executor, seed: np.random.SeedSequence) -> None:
         self.likelihood = BatchLikelihood(model, model.value_vars, None)
         nodes = [rv for rv in model.observed_RVs if isinstance(rv.owner.op, SimulatorRV)]
-        kernels = [rv.owner.op._distance for rv in nodes]
-        if not all(isinstance(kernel, LogLikelihoodKernel) for kernel in kernels):
+        self.kernels = [rv.owner.op._distance for rv in nodes]
+        if not all(isinstance(kernel, EXACT_KERNELS) for kernel in self.kernels):
             raise ValueError(
                 "fit_reference needs exact-likelihood nodes only (add_likelihood); the model "
                 "has an ABC distance node, whose ε kernel has no residuals to fit"
             )
-        self.noises = [kernel.noise for kernel in kernels]
         self.observed = [np.asarray(model.rvs_to_values[rv].data, dtype=float) for rv in nodes]
         self.executor, self.seed = executor, seed
         self.simulations = self.failures = 0
-        self.size = sum(data.size for data in self.observed)  # residuals per point
+        pairs = zip(self.kernels, self.observed, strict=True)
+        self.size = sum(kernel.n_residuals(data) for kernel, data in pairs)  # per point
         self._known: dict[bytes, np.ndarray | None] = {}
 
     def of_node(self, node: int, values: np.ndarray) -> np.ndarray:
-        """Whitened innovations of one node's simulated ``values`` against its data."""
-        noise, observed = self.noises[node], self.observed[node]
-        return innovations((observed - values) / noise.std(values), noise.correlation).ravel()
+        """Whitened residuals of one node's simulated ``values`` against its data."""
+        return self.kernels[node].residuals(self.observed[node], values)
 
     def batch(self, points: np.ndarray) -> list[np.ndarray | None]:
         """The residual vector at each point (None where a simulation failed)."""

@@ -20,7 +20,7 @@ from pytensor.graph.basic import Apply
 from pytensor.graph.op import Op
 
 from pymc_vcc.inference.error_model import ErrorBudget
-from pymc_vcc.inference.likelihood import log_likelihood
+from pymc_vcc.inference.likelihood import innovations, log_likelihood
 from pymc_vcc.inference.noise import OutputNoise, SensorNoise
 from pymc_vcc.inference.priors import Bounds, Prior, UniformPrior, check_prior_support
 from pymc_vcc.inference.pymc.model import (
@@ -53,6 +53,16 @@ class LogLikelihoodKernel(Op):
         _, observed, simulated = inputs
         output_storage[0][0] = np.atleast_1d(log_likelihood(observed, simulated, self.noise))
 
+    def residuals(self, observed: np.ndarray, simulated: np.ndarray) -> np.ndarray:
+        """The whitened innovations of ``observed`` from ``simulated`` (flat): standard normals
+        under the noise model, whose squares sum to −2 log p up to a constant."""
+        noise = self.noise
+        return innovations((observed - simulated) / noise.std(simulated), noise.correlation).ravel()
+
+    def n_residuals(self, observed: np.ndarray) -> int:
+        """How many :meth:`residuals` a simulation of ``observed``'s shape gives."""
+        return observed.size
+
 
 class SummaryLikelihoodKernel(Op):
     """PyTensor op ``(epsilon, observed, simulated) -> [log p(summaries | simulated)]`` under an
@@ -70,6 +80,14 @@ class SummaryLikelihoodKernel(Op):
 
     def perform(self, node, inputs, output_storage) -> None:
         output_storage[0][0] = np.atleast_1d(self.budget.log_likelihood(inputs[2]))
+
+    def residuals(self, observed: np.ndarray, simulated: np.ndarray) -> np.ndarray:
+        """The whitened residual of the budget's summaries (its own observed ones)."""
+        return self.budget.whitened(simulated)
+
+    def n_residuals(self, observed: np.ndarray) -> int:
+        """How many :meth:`residuals` a simulation gives: one per summary."""
+        return self.budget.observed.size
 
 
 def add_likelihood(
