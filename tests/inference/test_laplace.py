@@ -6,6 +6,7 @@ from typing import ClassVar
 import numpy as np
 import pymc as pm
 import pytest
+from scipy.special import expit
 
 from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.error_model import ErrorBudget, summarise
@@ -233,6 +234,13 @@ def test_several_starts_find_both_modes_and_smc_weighs_them(quiet_pymc):
             400, executor="serial", random_seed=2, reference=reference, progressbar=False
         )
     assert len(single.means) == 1 and len(reference.means) == 2
+    with pm.Model():  # starts at given values find the mode each lies near
+        add_likelihood("y", problem, observed, sensor_noise=NOISE)
+        near = [{"a": a, "b": 1.0} for a in (-1.3, 1.3)]
+        from_points = fit_reference(run=RunOptions(executor="serial", seed=0), points=near)
+    assert len(from_points.means) == 2
+    found = sorted(from_points.means[:, 0])  # a's value space: its place in (-3, 3), in logit
+    assert 6 * expit(np.array(found)) - 3 == pytest.approx([-1.5, 1.5], abs=0.05)
     a = tree["posterior"]["a"].values.ravel()
     assert 0.35 < np.mean(a > 0) < 0.65
     assert np.abs(a).mean() == pytest.approx(1.5, abs=0.02)

@@ -32,11 +32,12 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from contextlib import closing
 from typing import Any
 
 import numpy as np
+import pytensor.tensor as pt
 from pymc.blocking import DictToArrayBijection
 from pymc.distributions.simulator import SimulatorRV
 from pymc.model import Model, modelcontext
@@ -134,6 +135,7 @@ def fit_reference(
     model: Model | None = None,
     *,
     starts: int = 1,
+    points: Sequence[Mapping[str, float]] = (),
     max_simulations: int = 3000,
     step: float = 1e-2,
     inflation: float = 1.2,
@@ -149,6 +151,9 @@ def fit_reference(
         starts: fits, the first from the prior's initial point, the others from uniform
             places in the middle 80 % of the unit box; fits ending within the 99.9 % ellipsoid
             of a better one are the same mode.
+        points: more fits, from these parameter values (name -> value, every free
+            variable; e.g. draws of a broader posterior, where a mode may lie that the other
+            starts miss).
         max_simulations: simulations each fit may run (about dimension + 1 per iteration).
         step: forward-difference step in the unit box (a fraction of a box's width).
         inflation: factor on the Laplace standard deviations (≥ 1: a wider start is safer).
@@ -173,6 +178,7 @@ def fit_reference(
     fingerprint = _fingerprint(
         model,
         starts=starts,
+        points=[dict(point) for point in points],
         max_simulations=max_simulations,
         step=step,
         inflation=inflation,
@@ -192,6 +198,7 @@ def fit_reference(
     rng = np.random.default_rng(seed)
     places = [expit(np.clip(origin, -FIT_BOUND, FIT_BOUND))]
     places += [rng.uniform(0.1, 0.9, dimension) for _ in range(starts - 1)]
+    places += [expit(np.clip(_value_point(model, p), -FIT_BOUND, FIT_BOUND)) for p in points]
     with run.open_executor() as opened:
         residuals = _Residuals(model, opened, run.seed_sequence())
         if residuals.batch(origin[np.newaxis])[0] is None:
@@ -228,6 +235,19 @@ def fit_reference(
     if checkpoint is not None:
         reference.save(checkpoint, fingerprint)
     return reference
+
+
+def _value_point(model: Model, point: Mapping[str, float]) -> np.ndarray:
+    """The value-space vector of the parameter values ``point`` (each free variable's value
+    through its transform)."""
+    values = {}
+    for rv in model.free_RVs:
+        value = pt.as_tensor_variable(np.asarray(point[rv.name], dtype=float))
+        transform = model.rvs_to_transforms.get(rv)
+        if transform is not None:
+            value = transform.forward(value, *rv.owner.inputs)
+        values[model.rvs_to_values[rv].name] = np.asarray(value.eval(), dtype=float)
+    return DictToArrayBijection.map(values).data
 
 
 def _least_squares(residuals: _Residuals, place: np.ndarray, step: float, max_simulations: int):
