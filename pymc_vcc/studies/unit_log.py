@@ -41,7 +41,7 @@ from pymc_vcc.inference.error_model import (
     summarise,
 )
 from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
-from pymc_vcc.inference.pymc.laplace import fit_reference
+from pymc_vcc.inference.pymc.laplace import fit_reference, laplace_draws
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.reference import GaussianReference
 from pymc_vcc.inference.pymc.smc import sample_smc_abc
@@ -107,9 +107,11 @@ REJECTION_MAIN = 30  # main-phase draws per SMC particle (about 5 % accepted)
 REJECTION_QUANTILE = 0.05
 
 PREDICTIVE_DRAWS = 24  # posterior draws simulated for the predictive check
-EXACT_SHARE = 0.5
+EXACT_SHARE = 0.3
 """Share of the simulations of a record the model itself made (``coils`` ``model``) kept for
-its exact stage: the fits and the SMC under the sensors' errors alone."""
+its exact stage: the fits under the sensors' errors alone."""
+EXACT_STEP = 1e-3  # forward-difference step of the exact stage's fits, of each box
+EXACT_DRAWS = 1000  # posterior draws of the exact stage's Laplace approximation
 EXACT_STARTS = (0.1, 0.9)
 """Quantiles of the charge under the model's error whose particles start fits of the exact
 stage besides the mean: from the mean alone, model (13) found a mode 0.10 kg off."""
@@ -318,7 +320,7 @@ def calibrate_record(
         checked = SensorBudget.of(model, observed, accuracy).budget()
         affordable = max_simulations - simulations - PREDICTIVE_DRAWS
         tree, n_exact = _sample_exact(
-            model, observed, checked, prior, tree, particles, affordable, executor, seed
+            model, observed, checked, prior, tree, affordable, executor, seed
         )
         simulations += n_exact
     check, n_check = _predictive_check(tree, model, checked, executor, rng)
@@ -454,17 +456,18 @@ def _sample_exact(
     budget: ErrorBudget,
     prior: Prior,
     start: xr.DataTree,
-    particles: int,
     max_simulations: int,
     executor: Executor,
     seed: int,
 ) -> tuple[xr.DataTree, int]:
-    """The posterior of a record the model itself made, under ``budget`` (the sensors' errors
-    alone), and its simulations: least-squares fits from the ``start`` posterior (the
-    calibration under the model's error: its mean and the particles at :data:`EXACT_STARTS`),
-    then SMC tempered from the Laplace approximations at the modes found
-    (:func:`~pymc_vcc.inference.pymc.laplace.fit_reference`). Tempered from the prior, so
-    sharp a likelihood in ten parameters collapsed 96 particles onto wrong modes."""
+    """``start`` with its posterior replaced by that of a record the model itself made, under
+    ``budget`` (the sensors' errors alone), and the simulations that took: least-squares fits
+    from the ``start`` posterior (the calibration under the model's error: its mean and the
+    particles at :data:`EXACT_STARTS`) and the Laplace approximation at the modes found
+    (:func:`~pymc_vcc.inference.pymc.laplace.fit_reference`, forward differences of
+    :data:`EXACT_STEP` of each box, :func:`~pymc_vcc.inference.pymc.laplace.laplace_draws`).
+    SMC under so sharp a likelihood, from the prior or from that approximation, left 96
+    particles on wrong modes or too narrow (4 of the first 6 model records missed)."""
     run = RunOptions(executor=executor, seed=seed)
     posterior = start["posterior"]
     draws = np.column_stack([posterior[name].values.ravel() for name in prior.names])
@@ -475,22 +478,22 @@ def _sample_exact(
         add_likelihood("outputs", model, observed, error_budget=budget, prior=prior)
         for name, value in zip(prior.names, draws.mean(axis=0), strict=True):
             pymc_model.set_initval(pymc_model[name], float(value))
-        fits = 1 + len(points)
         reference = fit_reference(
-            points=points, max_simulations=max_simulations // (2 * fits), run=run
+            points=points,
+            max_simulations=max_simulations // (1 + len(points)),
+            step=EXACT_STEP,
+            inflation=1.0,
+            axis_rounds=0,
+            run=run,
         )
-        tree = sample_smc_abc(
-            particles,
-            executor=executor,
-            random_seed=seed,
-            progressbar=False,
-            # its cap is soft: every stage makes a step (one or two stages over, as measured)
-            max_simulations=max(1, max_simulations - reference.simulations - 2 * particles),
-            reference=reference,
-        )
-    stats = tree["sample_stats"]
-    sampled = int(stats["simulations"].sum() + stats["resumed_simulations"].sum())
-    return tree, reference.simulations + sampled
+        exact = laplace_draws(reference, EXACT_DRAWS, np.random.default_rng(seed))
+    dims = ("chain", "draw")
+    coords = {"chain": [0], "draw": np.arange(EXACT_DRAWS)}
+    tree = start.copy()
+    tree["posterior"] = xr.DataTree(
+        xr.Dataset({name: (dims, values[np.newaxis]) for name, values in exact.items()}, coords)
+    )
+    return tree, reference.simulations
 
 
 def _to_unit_charge(tree: xr.DataTree, offset: CoilOffset, rng: np.random.Generator) -> None:

@@ -11,7 +11,7 @@ from scipy.special import expit
 from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.error_model import ErrorBudget, summarise
 from pymc_vcc.inference.noise import SensorNoise
-from pymc_vcc.inference.pymc.laplace import fit_reference
+from pymc_vcc.inference.pymc.laplace import fit_reference, laplace_draws
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.reference import GaussianReference
@@ -178,6 +178,23 @@ def test_an_error_budgets_summaries_are_fitted_and_sampled_exactly(quiet_pymc):
     assert np.all(np.abs(draws.std(axis=0) / sd - 1) < 0.12)
     residual = summaries - means @ mean
     assert reference.costs[0] == pytest.approx(0.5 * np.sum(residual**2 / variance), rel=1e-2)
+
+
+def test_laplace_draws_are_the_exact_posterior_of_a_linear_model(quiet_pymc):
+    """Without secant corrections or inflation, the fit's Laplace approximation of a linear
+    Gaussian problem is its posterior: the draws, mapped back to the parameters, match it."""
+    observed = PROBLEM.observed(TRUTH, seed=7)
+    mean, covariance = PROBLEM.exact_posterior(observed)
+    with pm.Model():
+        add_likelihood("y", PROBLEM, observed, sensor_noise=NOISE)
+        reference = fit_reference(
+            run=RunOptions(executor="serial", seed=0), step=1e-4, inflation=1.0, axis_rounds=0
+        )
+        draws = laplace_draws(reference, 20_000, np.random.default_rng(1))
+    values = np.column_stack([draws[n] for n in PROBLEM.parameter_names])
+    sd = np.sqrt(np.diag(covariance))
+    assert np.all(np.abs((values.mean(axis=0) - mean) / sd) < 0.05)
+    assert np.all(np.abs(values.std(axis=0) / sd - 1) < 0.05)
 
 
 def test_a_saved_fit_is_reused_only_for_the_same_data(quiet_pymc, tmp_path):

@@ -139,6 +139,7 @@ def fit_reference(
     max_simulations: int = 3000,
     step: float = 1e-2,
     inflation: float = 1.2,
+    axis_rounds: int = AXIS_ROUNDS,
     run: RunOptions | None = None,
 ) -> GaussianReference:
     """Fit the model's exact-likelihood nodes by least squares from ``starts`` points and return
@@ -157,6 +158,9 @@ def fit_reference(
         max_simulations: simulations each fit may run (about dimension + 1 per iteration).
         step: forward-difference step in the unit box (a fraction of a box's width).
         inflation: factor on the Laplace standard deviations (≥ 1: a wider start is safer).
+        axis_rounds: rounds of secant corrections along the principal axes (0: the Laplace
+            approximation of the fit's own Jacobian, right when ``step`` is small enough for
+            the solver's error).
         run: where the fits' simulations run (their time limit is the nodes' own); its
             ``seed`` seeds the other starts and the simulations' random streams, and its
             ``checkpoint`` is a JSON file keeping the finished fit (a later call with the same
@@ -182,6 +186,7 @@ def fit_reference(
         max_simulations=max_simulations,
         step=step,
         inflation=inflation,
+        axis_rounds=axis_rounds,
         seed=seed
         if not isinstance(seed, np.random.SeedSequence)
         else [str(seed.entropy), list(seed.spawn_key)],
@@ -220,7 +225,7 @@ def fit_reference(
             fit = _least_squares(residuals, place, step, max_simulations)
             iterations += int(fit.nfev)
             mean, covariance = _laplace(fit, prior_precision)
-            for _ in range(AXIS_ROUNDS):
+            for _ in range(axis_rounds):
                 mean, covariance = _along_axes(cost, mean, covariance)
             modes.append((float(fit.cost), mean, covariance))
     modes = _distinct(modes)
@@ -235,6 +240,33 @@ def fit_reference(
     if checkpoint is not None:
         reference.save(checkpoint, fingerprint)
     return reference
+
+
+def laplace_draws(
+    reference: GaussianReference, n: int, rng: np.random.Generator, model: Model | None = None
+) -> dict[str, np.ndarray]:
+    """``n`` draws of the Laplace approximation of the posterior at the modes of ``reference``
+    (a :func:`fit_reference` of ``model``, default the current), as parameter values (name ->
+    array): each mode weighted by its Laplace evidence, exp(−cost) √det Σ (the prior taken
+    as flat across the modes)."""
+    model = modelcontext(model)
+    log_det = np.linalg.slogdet(reference.covariances)[1]
+    log_evidence = -np.asarray(reference.costs) + 0.5 * log_det
+    weights = np.exp(log_evidence - log_evidence.max())
+    weighted = GaussianReference(
+        reference.means, reference.covariances, weights=weights / weights.sum()
+    )
+    values = weighted.sample(n, rng)
+    if values.shape[1] != len(model.free_RVs):
+        raise ValueError("laplace_draws needs a model whose free variables are all scalars")
+    draws = {}
+    for column, rv in enumerate(model.free_RVs):
+        value = pt.as_tensor_variable(values[:, column])
+        transform = model.rvs_to_transforms.get(rv)
+        if transform is not None:
+            value = transform.backward(value, *rv.owner.inputs)
+        draws[rv.name] = np.asarray(value.eval(), dtype=float)
+    return draws
 
 
 def _value_point(model: Model, point: Mapping[str, float]) -> np.ndarray:
@@ -351,4 +383,4 @@ def _along_axes(
     return mean + vectors @ shift, (vectors * new_sds**2) @ vectors.T
 
 
-__all__ = ["fit_reference"]
+__all__ = ["fit_reference", "laplace_draws"]
