@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import logging
 import time
-import warnings
 from statistics import median
 from typing import ClassVar
 
@@ -31,6 +30,7 @@ from pymc.smc.kernels import IMH
 from pymc_vcc.execution.executors import make_executor
 from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.inference.pymc.batch import python_ops_quiet
 from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import add_simulator
 from pymc_vcc.inference.pymc.smc import ParallelIMH
@@ -225,8 +225,7 @@ def _accuracy(quick: bool) -> dict[str, float | int]:
 def run(quick: bool) -> dict[str, float | int | str]:
     """Stage speed-ups (processes, Dask) and simulations SMC needs to match rejection ABC."""
     logging.getLogger("pymc").setLevel(logging.ERROR)
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Numba will use object mode")
+    with python_ops_quiet():
         settings = {
             "smc_speed_simulation_seconds": SIMULATION_SECONDS,
             "smc_speed_draws": 40 if quick else 100,

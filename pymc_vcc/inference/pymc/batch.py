@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import hashlib
 import time
-from collections.abc import Callable, Generator, Sequence
+import warnings
+from collections.abc import Callable, Generator, Iterator, Sequence
+from contextlib import contextmanager
 from functools import partial
 from typing import Any
 
@@ -30,6 +32,15 @@ from pymc_vcc.execution.executors import Executor, WorkerCrash
 from pymc_vcc.execution.outcomes import OK, SimulationOutcome, crash_outcome
 from pymc_vcc.inference.pymc.model import SimulatorFunction
 from pymc_vcc.physics.failures import FailureKind
+
+
+@contextmanager
+def python_ops_quiet() -> Iterator[None]:
+    """Silence PyTensor's warning that Numba runs a Python Op in object mode: the simulator
+    and likelihood Ops are Python by design (the simulations run outside PyTensor)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "Numba will use object mode", UserWarning)
+        yield
 
 
 def _generic_outcome(function: Callable[..., Any], rng, params, size) -> SimulationOutcome:

@@ -51,7 +51,7 @@ from scipy.stats import chi2
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.outcomes import SimulationOutcome
-from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest
+from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest, python_ops_quiet
 from pymc_vcc.inference.pymc.likelihood import LogLikelihoodKernel, SummaryLikelihoodKernel
 from pymc_vcc.inference.pymc.reference import GaussianReference
 
@@ -204,7 +204,7 @@ def fit_reference(
     places = [expit(np.clip(origin, -FIT_BOUND, FIT_BOUND))]
     places += [rng.uniform(0.1, 0.9, dimension) for _ in range(starts - 1)]
     places += [expit(np.clip(_value_point(model, p), -FIT_BOUND, FIT_BOUND)) for p in points]
-    with run.open_executor() as opened:
+    with run.open_executor() as opened, python_ops_quiet():
         residuals = _Residuals(model, opened, run.seed_sequence())
         if residuals.batch(origin[np.newaxis])[0] is None:
             raise RuntimeError(

@@ -74,7 +74,7 @@ from pymc_vcc.execution.executors import (
 from pymc_vcc.execution.options import RunOptions
 from pymc_vcc.execution.outcomes import OK
 from pymc_vcc.execution.store import LikelihoodRecord, LikelihoodStore, describe_callable
-from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest
+from pymc_vcc.inference.pymc.batch import BatchLikelihood, graph_digest, python_ops_quiet
 from pymc_vcc.inference.pymc.layout import standard_layout
 from pymc_vcc.inference.pymc.model import DistanceKernel, SimulatorFunction
 from pymc_vcc.inference.pymc.reference import GaussianReference
@@ -628,9 +628,7 @@ def sample_smc_abc(
         )
     try:
         opening = RunOptions(executor=executor, n_workers=n_workers).open_executor()
-        with opening as opened, warnings.catch_warnings():
-            # The distance kernel is a Python Op by design: the simulations run outside PyTensor.
-            warnings.filterwarnings("ignore", "Numba will use object mode", UserWarning)
+        with opening as opened, python_ops_quiet():
             tree = pm.sample_smc(
                 draws=int(draws),
                 kernel=KERNELS[kernel],
