@@ -24,6 +24,10 @@ halves the effective sample size. Instead,
    the posterior. A mode no fit reached is missed: the reference-started posterior is that of
    the modes found.
 
+:func:`laplace_draws` draws that mixture itself as the posterior, each mode weighted by its
+Laplace evidence, where the likelihood is near Gaussian and SMC's particles would be too few
+for its sharpness (a model's own record under the sensors' errors alone).
+
 The fit ignores a Student-t density (it fits the whitened innovations by least squares) and
 any other observed term or potential of the model; the SMC does not.
 """
@@ -256,30 +260,33 @@ def laplace_draws(
     weighted = GaussianReference(
         reference.means, reference.covariances, weights=weights / weights.sum()
     )
-    values = weighted.sample(n, rng)
-    if values.shape[1] != len(model.free_RVs):
+    if weighted.means.shape[1] != len(model.free_RVs):
         raise ValueError("laplace_draws needs a model whose free variables are all scalars")
-    draws = {}
-    for column, rv in enumerate(model.free_RVs):
-        value = pt.as_tensor_variable(values[:, column])
-        transform = model.rvs_to_transforms.get(rv)
-        if transform is not None:
-            value = transform.backward(value, *rv.owner.inputs)
-        draws[rv.name] = np.asarray(value.eval(), dtype=float)
-    return draws
+    values = weighted.sample(n, rng)
+    return {
+        rv.name: _through_transform(model, rv, values[:, column], forward=False)
+        for column, rv in enumerate(model.free_RVs)
+    }
 
 
 def _value_point(model: Model, point: Mapping[str, float]) -> np.ndarray:
     """The value-space vector of the parameter values ``point`` (each free variable's value
     through its transform)."""
-    values = {}
-    for rv in model.free_RVs:
-        value = pt.as_tensor_variable(np.asarray(point[rv.name], dtype=float))
-        transform = model.rvs_to_transforms.get(rv)
-        if transform is not None:
-            value = transform.forward(value, *rv.owner.inputs)
-        values[model.rvs_to_values[rv].name] = np.asarray(value.eval(), dtype=float)
+    values = {
+        model.rvs_to_values[rv].name: _through_transform(model, rv, point[rv.name], forward=True)
+        for rv in model.free_RVs
+    }
     return DictToArrayBijection.map(values).data
+
+
+def _through_transform(model: Model, rv: Any, value: Any, *, forward: bool) -> np.ndarray:
+    """A free variable's ``value`` taken into its value space (``forward``) or back out."""
+    tensor = pt.as_tensor_variable(np.asarray(value, dtype=float))
+    transform = model.rvs_to_transforms.get(rv)
+    if transform is not None:
+        move = transform.forward if forward else transform.backward
+        tensor = move(tensor, *rv.owner.inputs)
+    return np.asarray(tensor.eval(), dtype=float)
 
 
 def _least_squares(residuals: _Residuals, place: np.ndarray, step: float, max_simulations: int):
