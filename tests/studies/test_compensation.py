@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy.special import logit
 
 from pymc_vcc.inference.error_model import SensorAccuracy
 from pymc_vcc.physics.simulate import VCCSimulator
@@ -52,7 +53,8 @@ def _draws(unit, model, centre, rng, n):
 def test_a_compensation_moves_the_commissionings_parameters_inside_their_bounds(record):
     """Each draw's model moves by what the commissioning calibration would absorb of its unit:
     only the commissioning's parameters (a fault parameter of the later record stays), inside
-    their bounds, differently for different units; a unit whose commissioning run fails gets
+    their bounds, differently for different units, the same unit by the same move of the
+    bounds' logits wherever its later parameters lie; a unit whose commissioning run fails gets
     no compensation and fails."""
     from pymc_vcc.execution.executors import make_executor
 
@@ -66,6 +68,8 @@ def test_a_compensation_moves_the_commissionings_parameters_inside_their_bounds(
     for draw in draws:
         draw["theta"] = {**draw["theta"], "DP_RESTR": 5000.0}
     draws[0]["theta_c"] = {**draws[0]["theta_c"], "M0": -1.0}  # cannot run
+    # the unit of draws[1] once more, its later condenser HTC near the bound
+    draws[2] = {**draws[1], "theta": {**draws[1]["theta"], "HTC_CA": 11.0}}
     with make_executor("processes", 2) as executor:
         compensate(draws, commissioning, executor, SensorAccuracy())
     assert draws[0]["model_theta"] is None
@@ -81,6 +85,16 @@ def test_a_compensation_moves_the_commissionings_parameters_inside_their_bounds(
         unit.parameter_spec(n).high - unit.parameter_spec(n).low for n in NAMES
     ]
     assert np.all(spread > 1e-4)  # each parameter moves, by unit
+    # the same unit's move is the same in the bounds' logits: smaller near a bound
+    low, high = unit.parameter_spec("HTC_CA").low, unit.parameter_spec("HTC_CA").high
+    logit_moves = [
+        logit((d["model_theta"]["HTC_CA"] - low) / (high - low))
+        - logit((d["theta"]["HTC_CA"] - low) / (high - low))
+        for d in draws[1:3]
+    ]
+    assert logit_moves[0] == pytest.approx(logit_moves[1], rel=1e-9)
+    moves = [abs(d["model_theta"]["HTC_CA"] - d["theta"]["HTC_CA"]) for d in draws[1:3]]
+    assert moves[1] < 0.5 * moves[0]
 
 
 def test_a_draws_sensor_biases_shift_the_unit_by_their_share_of_the_bound(record):
