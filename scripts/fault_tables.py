@@ -1,0 +1,119 @@
+"""Markdown tables of a fault benchmark's rows, for the docs' results page.
+
+``pymc-vcc validate --faults all --out DIR`` appends one JSON row per case to
+``DIR/checkpoints/validate-faults.jsonl``; the measured rows behind the docs are kept in
+``docs/results/runs/``. Run ``.venv/bin/python scripts/fault_tables.py ROWS.jsonl``: the score
+(:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), the scores of each case, and the
+cases not diagnosed correctly or whose interval misses.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import sys
+from pathlib import Path
+
+from pymc_vcc.studies.fault_benchmark import CASES, _label, summarise_cases
+from pymc_vcc.studies.faults import FAULTS
+
+CATEGORIES = ("false alarm", "misdiagnosis", "missed detection", "no response")
+SHOWN_PROBABILITY = 0.1  # the probabilities a failed case lists
+
+
+def _case_name(label: str) -> str:
+    """``fault: {"ID": change}`` -> ``fault (ID ±x %)`` (``no fault`` for None)."""
+    fault, changes = label.split(": ", 1)
+    moves = ", ".join(
+        f"{pid} {value / 1e3:.0f} kPa" if abs(value) > 1 else f"{pid} {100 * value:+.0f} %"
+        for pid, value in json.loads(changes).items()
+    )
+    name = "no fault" if fault == "None" else fault
+    return f"{name} ({moves})" if moves else name
+
+
+def _summary(rows: list[dict]) -> str:
+    t = summarise_cases(rows)
+    faulted = [r for r in rows if r["fault"] is not None]
+    lines = [
+        "| | |",
+        "|---|---:|",
+        f"| false alarms (of the no-fault cases) | {100 * t['false_alarm_rate']:.0f} % |",
+        f"| correct diagnosis (of the faulted cases) | {100 * t['correct_rate']:.0f} % "
+        f"({sum(r['score'] == 'correct diagnosis' for r in faulted)} of {len(faulted)}) |",
+        f"| misdiagnosis | {100 * t['misdiagnosis_rate']:.0f} % |",
+        f"| missed detection | {100 * t['missed_rate']:.0f} % |",
+        f"| no response | {100 * t['no_response_rate']:.0f} % |",
+        f"| median severity error (of the intensity) | {t['median_severity_error']:.2f} |",
+        f"| true intensity inside its 95 % interval | {100 * t['intensity_coverage']:.0f} % "
+        f"({sum(r['covered'] for r in faulted)} of {len(faulted)}) |",
+        f"| leak alarm: false alarms (of the no-fault cases) | "
+        f"{100 * t['leak_false_alarm_rate']:.0f} % |",
+    ]
+    lines += [
+        f"| leak alarm: detection at a {100 * loss:.0f} % loss | {100 * p:.0f} % |"
+        for loss, p in t["leak_detection"]
+    ]
+    lines += [
+        f"| simulations a case (mean) | {t['simulations']:.0f} |",
+        f"| wall time a case (median) | {t['seconds']:.0f} s |",
+    ]
+    return "\n".join(lines)
+
+
+def _by_case(rows: list[dict]) -> str:
+    lines = [
+        "| case | cases | correct | " + " | ".join(CATEGORIES) + " | median severity error | "
+        "covered |",
+        "|---|" + "---:|" * (len(CATEGORIES) + 4),
+    ]
+    for case in CASES:
+        mine = [r for r in rows if r["case"] == _label(case)]
+        if not mine:
+            continue
+        right = "correct" if case[0] is None else "correct diagnosis"
+        cells = [_case_name(_label(case)), str(len(mine))]
+        cells += [str(sum(r["score"] == s for r in mine)) for s in (right, *CATEGORIES)]
+        if case[0] is None:
+            cells += ["—", "—"]
+        else:
+            cells.append(f"{statistics.median(r['severity_error'] for r in mine):.2f}")
+            cells.append(f"{sum(r['covered'] for r in mine)}/{len(mine)}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _failures(rows: list[dict]) -> str:
+    lines = [
+        "| unit | case | verdict | probabilities ≥ 0.1 | intensity: true, read (95 %) |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        right = r["score"] in ("correct", "correct diagnosis")
+        if right and r.get("covered", True):
+            continue
+        shown = ", ".join(
+            f"{name} {p:.2f}" for name, p in r["probabilities"].items() if p >= SHOWN_PROBABILITY
+        )
+        intensity = ""
+        if r["fault"] is not None:
+            unit, factor = {f.name: f.display for f in FAULTS}[r["fault"]]
+            true, mean, low, high = (
+                factor * r[key]
+                for key in ("true_intensity", "intensity_mean", "intensity_low", "intensity_high")
+            )
+            intensity = f"{true:.0f}, {mean:.0f} ({low:.0f}–{high:.0f}) {unit}"
+        lines.append(
+            f"| {r['unit_seed']} | {_case_name(r['case'])} | {r['verdict']} | {shown} | "
+            f"{intensity} |"
+        )
+    return "\n".join(lines)
+
+
+def main(path: str) -> None:
+    rows = [json.loads(line) for line in Path(path).read_text().splitlines()]
+    print(_summary(rows), _by_case(rows), _failures(rows), sep="\n\n")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
