@@ -14,7 +14,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from pymc_vcc.studies.fault_benchmark import CASES, _label, summarise_cases
+from pymc_vcc.studies.fault_benchmark import CASES, case_label, summarise_cases
 from pymc_vcc.studies.faults import FAULTS
 
 CATEGORIES = ("false alarm", "misdiagnosis", "missed detection", "no response")
@@ -68,11 +68,11 @@ def _by_case(rows: list[dict]) -> str:
         "|---|" + "---:|" * (len(CATEGORIES) + 4),
     ]
     for case in CASES:
-        mine = [r for r in rows if r["case"] == _label(case)]
+        mine = [r for r in rows if r["case"] == case_label(case)]
         if not mine:
             continue
         right = "correct" if case[0] is None else "correct diagnosis"
-        cells = [_case_name(_label(case)), str(len(mine))]
+        cells = [_case_name(case_label(case)), str(len(mine))]
         cells += [str(sum(r["score"] == s for r in mine)) for s in (right, *CATEGORIES)]
         if case[0] is None:
             cells += ["—", "—"]

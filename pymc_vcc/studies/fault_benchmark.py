@@ -180,7 +180,8 @@ def _faulted(
     return moved, float(fault.intensity(after, before, unit)[0])
 
 
-def _label(case: Case) -> str:
+def case_label(case: Case) -> str:
+    """A case's key in the benchmark's rows: ``fault: {"ID": change, ...}``."""
     fault_name, changes = case
     return f"{fault_name}: {json.dumps(changes, sort_keys=True)}"
 
@@ -279,7 +280,7 @@ def fault_benchmark(
     with settings.open_executor() as executor:
         for k in range(n_units):
             seed = settings.seed + 100 * k
-            keys = [(seed, _label(case), budget) for case in cases]
+            keys = [(seed, case_label(case), budget) for case in cases]
             runs += [done[key] for key in keys if key in done]
             if all(key in done for key in keys):
                 continue
@@ -347,4 +348,11 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.D
     return tree
 
 
-__all__ = ["CASES", "FaultBenchmarkResult", "fault_benchmark", "score", "summarise_cases"]
+__all__ = [
+    "CASES",
+    "FaultBenchmarkResult",
+    "case_label",
+    "fault_benchmark",
+    "score",
+    "summarise_cases",
+]
