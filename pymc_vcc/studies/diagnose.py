@@ -20,6 +20,7 @@ non-condensable gas.
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -46,6 +47,7 @@ from pymc_vcc.studies.unit_log import (
     RECORD_BUDGETS,
     SETTLE,
     calibrate_record,
+    predictive_checks,
 )
 
 NAMED = 0.9  # a fault is named when P(intensity beyond its threshold) is at least this
@@ -66,6 +68,9 @@ class Diagnosis:
         confusions: pairs of faults the data cannot separate, each with what would (a sensor
             not logged, or more operating steps when the logged sensors are the best).
         commissioned: the commissioning posterior's mean of each parameter.
+        unreproduced: the outputs the model could not reproduce at commissioning (its
+            predictive check failed there: :func:`commissioning_misfits`); the intensities
+            are read against a commissioning that misses them.
     """
 
     tree: xr.DataTree
@@ -74,6 +79,7 @@ class Diagnosis:
     verdict: str
     confusions: list[tuple[str, str, str]] = field(default_factory=list)
     commissioned: dict[str, float] = field(default_factory=dict)
+    unreproduced: list[str] = field(default_factory=list)
 
     def summary(self) -> dict:
         """The JSON summary: per fault its intensity (mean, 95 % interval) and probability."""
@@ -95,6 +101,7 @@ class Diagnosis:
             "faults": faults,
             "confusions": [list(c) for c in self.confusions],
             "charge_change_kg": float(charge.mean() - self.commissioned[CHARGE]),
+            "commissioning_unreproduced": self.unreproduced,
         }
 
     def plot(self) -> Figure:
@@ -134,7 +141,25 @@ class Diagnosis:
             lines.append(
                 f"\n{first} and {second} are not distinguishable with these sensors; {advice}"
             )
+        if self.unreproduced:
+            lines.append(f"\n{_misfit_caution(self.unreproduced)}")
         return "\n".join(lines)
+
+
+def commissioning_misfits(commissioning: xr.DataTree) -> list[str]:
+    """The outputs whose predictive check failed at commissioning (as
+    :func:`~pymc_vcc.studies.unit_log.calibrate_record` stores it; none for a posterior
+    written without one)."""
+    if "sample_stats" not in commissioning or "ppc_misfit" not in commissioning["sample_stats"]:
+        return []
+    return [name for name, check in predictive_checks(commissioning).items() if check["misfit"]]
+
+
+def _misfit_caution(outputs: Sequence[str]) -> str:
+    return (
+        f"caution: at commissioning the model could not reproduce {', '.join(outputs)}; "
+        "every intensity is read against that commissioning"
+    )
 
 
 def verdict(probabilities: Mapping[str, float]) -> tuple[str, list[tuple[str, str]]]:
@@ -270,6 +295,9 @@ def diagnose(
             f"unit's cycle is {unit.cycle!r}"
         )
     accuracy = SensorAccuracy() if accuracy is None else accuracy
+    unreproduced = commissioning_misfits(commissioning)
+    if unreproduced:
+        warnings.warn(_misfit_caution(unreproduced), stacklevel=2)
     posterior = commissioning["posterior"]
     commissioned = {
         str(n): float(posterior[n].mean()) for n in posterior.data_vars if n in unit.parameters.ids
@@ -320,7 +348,7 @@ def diagnose(
             else f"a {sensor} sensor would tell them apart"
         )
         confusions.append((a, b, advice))
-    return Diagnosis(tree, intensities, probabilities, text, confusions, commissioned)
+    return Diagnosis(tree, intensities, probabilities, text, confusions, commissioned, unreproduced)
 
 
 def diagnose_study(
@@ -393,6 +421,7 @@ __all__ = [
     "FAULTS",
     "Diagnosis",
     "Fault",
+    "commissioning_misfits",
     "diagnose",
     "diagnose_study",
     "separating_sensor",

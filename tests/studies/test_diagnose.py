@@ -133,6 +133,38 @@ def test_verdict_names_one_several_none_or_the_pair_it_cannot_separate():
     assert pairs == [] and text == "no fault named; possible: a"
 
 
+def test_a_commissioning_the_model_missed_is_named_in_the_report():
+    """The outputs whose predictive check failed at commissioning are read from its tree and
+    stated under the report (none for a tree written without a check)."""
+    import xarray as xr
+
+    from pymc_vcc.studies.diagnose import Diagnosis, commissioning_misfits
+
+    draws = {"M0": [1.5] * 8}
+    assert commissioning_misfits(_posterior(draws)) == []
+    outputs = ["TD", "PD", "TS"]
+    checks = {
+        "ppc_z_mean": [0.1, 4.0, -3.0],
+        "ppc_p_value": [0.6, 1e-5, 2e-4],
+        "ppc_misfit": [0.0, 1.0, 1.0],
+    }
+    stats = xr.Dataset({k: ("output", v) for k, v in checks.items()}, coords={"output": outputs})
+    tree = xr.DataTree.from_dict(
+        {"posterior": _posterior(draws)["posterior"].to_dataset(), "sample_stats": stats}
+    )
+    assert commissioning_misfits(tree) == ["PD", "TS"]
+    diagnosis = Diagnosis(
+        tree,
+        {f.name: np.zeros(8) for f in FAULTS},
+        {f.name: 0.0 for f in FAULTS},
+        "no fault",
+        commissioned={"M0": 1.5},
+        unreproduced=["PD", "TS"],
+    )
+    assert "could not reproduce PD, TS" in diagnosis.format_table().splitlines()[-1]
+    assert diagnosis.summary()["commissioning_unreproduced"] == ["PD", "TS"]
+
+
 def test_cases_are_scored_in_yuill_and_brauns_categories():
     from pymc_vcc.studies.fault_benchmark import score
 
