@@ -473,8 +473,9 @@ def compensate(
     mean, covariance, _ = error_moments(errors)
     precision = np.linalg.inv(covariance + sensors.parts["noise"])
     bounds = {name: _bounds(model.unit, name) for name in names}
-    ranges = np.array([high - low for low, high in bounds.values()])
-    fraction = _fraction(centre, *np.array(list(bounds.values())).T)
+    lows, highs = np.array(list(bounds.values())).T
+    ranges = highs - lows
+    fraction = _fraction(centre, lows, highs)
     slope = ranges * fraction * (1.0 - fraction)  # ∂ parameter / ∂ its logit at the centre
     jacobian = jacobian * slope
     ridge = np.diag((slope / (COMPENSATION_SPREAD * ranges)) ** 2)
