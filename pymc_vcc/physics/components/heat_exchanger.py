@@ -23,10 +23,24 @@ from pymc_vcc.physics.scratch import stack_empty, uncounted
 
 
 @uncounted
-def _sweep(volume, rho, drho_dp, drho_dh, h, source, inflow, dp_guess, flow_eps, alpha, beta):
+def _sweep(
+    per_stored,
+    specific_volume,
+    mass_by_p,
+    mass_by_h,
+    h,
+    source,
+    inflow,
+    dp_guess,
+    flow_eps,
+    alpha,
+    beta,
+):
     """One sweep with the upwind weights at ``dp_guess``: each cell's dh/dt as
     ``alpha + beta dp/dt`` into ``alpha`` and ``beta``; returns the zone outflow as
-    ``(a, b)``, outflow = a + b dp/dt."""
+    ``(a, b)``, outflow = a + b dp/dt. Per cell, what both sweeps share (computed outside the
+    chain from cell to cell): ``per_stored`` 1/(V ρ), ``specific_volume`` 1/ρ and
+    ``mass_by_p``, ``mass_by_h`` V ∂ρ/∂p, V ∂ρ/∂h."""
     n = h.size
     a_flow = inflow
     b_flow = 0.0
@@ -38,11 +52,10 @@ def _sweep(volume, rho, drho_dp, drho_dh, h, source, inflow, dp_guess, flow_eps,
             w = upwind_weight(a_flow + b_flow * dp_guess, flow_eps)
             transport_a = w * a_flow * (h[i - 1] - h[i])
             transport_b = w * b_flow * (h[i - 1] - h[i])
-        stored = volume[i] * rho[i]
-        alpha[i] = (transport_a + source[i]) / stored
-        beta[i] = (transport_b + volume[i]) / stored
-        a_flow = a_flow - volume[i] * drho_dh[i] * alpha[i]
-        b_flow = b_flow - volume[i] * (drho_dh[i] * beta[i] + drho_dp[i])
+        alpha[i] = (transport_a + source[i]) * per_stored[i]
+        beta[i] = transport_b * per_stored[i] + specific_volume[i]
+        a_flow = a_flow - mass_by_h[i] * alpha[i]
+        b_flow = b_flow - (mass_by_h[i] * beta[i] + mass_by_p[i])
     return a_flow, b_flow
 
 
@@ -66,14 +79,21 @@ def zone_derivatives(
     affine solve repeated once with them, a fixed two-pass scheme (so the result is a smooth
     function of the state). Total mass is conserved exactly: Σ V dρ/dt = inflow - outflow.
     """
-    beta = stack_empty(h.size)  # dh_dt holds the alphas
-    a_out, b_out = _sweep(
-        volume, rho, drho_dp, drho_dh, h, source, inflow, 0.0, flow_eps, dh_dt, beta
-    )
+    n = h.size
+    beta = stack_empty(n)  # dh_dt holds the alphas
+    per_stored = stack_empty(n)
+    specific_volume = stack_empty(n)
+    mass_by_p = stack_empty(n)
+    mass_by_h = stack_empty(n)
+    for i in range(n):
+        per_stored[i] = 1.0 / (volume[i] * rho[i])
+        specific_volume[i] = 1.0 / rho[i]
+        mass_by_p[i] = volume[i] * drho_dp[i]
+        mass_by_h[i] = volume[i] * drho_dh[i]
+    shared = (per_stored, specific_volume, mass_by_p, mass_by_h, h, source, inflow)
+    a_out, b_out = _sweep(*shared, 0.0, flow_eps, dh_dt, beta)
     dp_dt = (outflow - a_out) / b_out
-    a_out, b_out = _sweep(
-        volume, rho, drho_dp, drho_dh, h, source, inflow, dp_dt, flow_eps, dh_dt, beta
-    )
+    a_out, b_out = _sweep(*shared, dp_dt, flow_eps, dh_dt, beta)
     dp_dt = (outflow - a_out) / b_out
     for i in range(h.size):
         dh_dt[i] += beta[i] * dp_dt

@@ -63,6 +63,9 @@ class SaturationPoint(NamedTuple):
     rho_l_p: float
     rho_v: float
     rho_v_p: float
+    table_interval: int  # the single-phase tables' pressure interval holding p, its width and
+    table_width: float  # p's local coordinate (every lookup at p shares them)
+    table_t: float
 
 
 _MAX_ITERATIONS = 60
@@ -220,7 +223,7 @@ def _bicubic_jet(
 @njit(cache=True)
 def _region(
     tables: PropertyTables,
-    p: float,
+    sat: SaturationPoint,
     h: float,
     a: float,
     a_p: float,
@@ -228,8 +231,8 @@ def _region(
     b_p: float,
     liquid: bool,
 ) -> tuple[np.ndarray, int, int, float, float, float, float, float, float]:
-    """Locate (p, h) in the liquid or vapour table, whose enthalpy span at p runs from ``a`` to
-    ``b`` (with their slopes d/dp ``a_p`` and ``b_p``).
+    """Locate h at the pressure of ``sat`` in the liquid or vapour table, whose enthalpy span
+    at that pressure runs from ``a`` to ``b`` (with their slopes d/dp ``a_p`` and ``b_p``).
 
     Returns the table, cell indices, cell sizes, local coordinates, the width w of the region
     at p and the derivative d xi/dp at constant h.
@@ -243,28 +246,26 @@ def _region(
     w = b - a
     xi = (h - a) / w
     xi_p = -(a_p + xi * (b_p - a_p)) / w
-    ip = _interval(tables.table_p, p)
-    dp = tables.table_p[ip + 1] - tables.table_p[ip]
     jx = _interval(xi_nodes, xi)
     dxi = xi_nodes[jx + 1] - xi_nodes[jx]
-    tp = (p - tables.table_p[ip]) / dp
     rx = (xi - xi_nodes[jx]) / dxi
-    return table, ip, jx, dp, dxi, tp, rx, w, xi_p
+    return table, sat.table_interval, jx, sat.table_width, dxi, sat.table_t, rx, w, xi_p
 
 
 @njit(cache=True)
 def _single_phase(
-    tables: PropertyTables, sat: SaturationPoint, p: float, h: float
+    tables: PropertyTables, sat: SaturationPoint, h: float
 ) -> tuple[np.ndarray, int, int, float, float, float, float, float, float]:
-    """:func:`_region` of (p, h) outside the dome (liquid below h_l, vapour above h_v), given
-    ``sat``, the :func:`saturation_point` of ``p``."""
+    """:func:`_region` of h at the pressure of ``sat`` (its :func:`saturation_point`) outside
+    the dome: liquid below h_l, vapour above h_v."""
     if h < sat.h_l:
-        return _region(tables, p, h, sat.h_min, sat.h_min_p, sat.h_l, sat.h_l_p, True)
-    return _region(tables, p, h, sat.h_v, sat.h_v_p, sat.h_max, sat.h_max_p, False)
+        return _region(tables, sat, h, sat.h_min, sat.h_min_p, sat.h_l, sat.h_l_p, True)
+    return _region(tables, sat, h, sat.h_v, sat.h_v_p, sat.h_max, sat.h_max_p, False)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _in_range(tables: PropertyTables, p: float) -> bool:
+    """Whether the tables hold pressure ``p`` (inlined: a call of its own cost 1 % of a run)."""
     return p >= tables.p_min and p <= tables.p_max
 
 
@@ -275,9 +276,11 @@ def saturation_point(tables: PropertyTables, p: float) -> SaturationPoint:
     if not _in_range(tables, p):
         return SaturationPoint(
             False, 0, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN,
-            NAN, NAN,
+            NAN, NAN, 0, NAN, NAN,
         )  # fmt: skip
     i, width, t = _sat_locate(tables, p)
+    ip = _interval(tables.table_p, p)
+    dp = tables.table_p[ip + 1] - tables.table_p[ip]
     h_min, h_min_p = _sat_curve(tables, H_MIN, i, width, t)
     h_max, h_max_p = _sat_curve(tables, H_MAX, i, width, t)
     h_l, h_l_p = _sat_curve(tables, H_LIQ, i, width, t)
@@ -288,7 +291,7 @@ def saturation_point(tables: PropertyTables, p: float) -> SaturationPoint:
     rho_v, rho_v_p = _sat_curve(tables, RHO_VAP, i, width, t)
     return SaturationPoint(
         True, i, width, t, h_min, h_min_p, h_max, h_max_p, h_l, h_l_p, h_v, h_v_p, T_b, T_d,
-        rho_l, rho_l_p, rho_v, rho_v_p,
+        rho_l, rho_l_p, rho_v, rho_v_p, ip, dp, (p - tables.table_p[ip]) / dp,
     )  # fmt: skip
 
 
@@ -313,7 +316,7 @@ def state_at(
         return NAN, NAN, NAN, NAN, NAN
     x = (h - h_l) / (h_v - h_l)
     if h < h_l or h > h_v:
-        table, ip, jx, dp, dxi, tp, rx, w, xi_p = _single_phase(tables, sat, p, h)
+        table, ip, jx, dp, dxi, tp, rx, w, xi_p = _single_phase(tables, sat, h)
         T, _, _ = _bicubic(table, PROP_T, ip, jx, dp, dxi, tp, rx)
         rho, rho_p, rho_xi = _bicubic(table, PROP_RHO, ip, jx, dp, dxi, tp, rx)
         return T, rho, rho_p + rho_xi * xi_p, rho_xi / w, x
@@ -346,7 +349,7 @@ def state_values_at(
         return NAN, NAN, NAN
     x = (h - sat.h_l) / (sat.h_v - sat.h_l)
     if h < sat.h_l or h > sat.h_v:
-        table, ip, jx, dp, dxi, tp, rx, _, _ = _single_phase(tables, sat, p, h)
+        table, ip, jx, dp, dxi, tp, rx, _, _ = _single_phase(tables, sat, h)
         T = _bicubic_value(table, PROP_T, ip, jx, dp, dxi, tp, rx)
         return T, _bicubic_value(table, PROP_RHO, ip, jx, dp, dxi, tp, rx), x
     rho = 1.0 / (1.0 / sat.rho_l + x * (1.0 / sat.rho_v - 1.0 / sat.rho_l))
@@ -383,7 +386,7 @@ def density_h_derivatives_along(
     if not (sat.inside and h >= sat.h_min and h <= sat.h_max):
         return NAN, NAN, NAN, NAN, NAN, NAN
     if h < h_l or h > h_v:
-        table, ip, jx, dp, dxi, tp, rx, w, xi_p = _single_phase(tables, sat, p, h)
+        table, ip, jx, dp, dxi, tp, rx, w, xi_p = _single_phase(tables, sat, h)
         w_p = sat.h_l_p - sat.h_min_p if h < h_l else sat.h_max_p - sat.h_v_p
         R, R_x, R_xx, R_xxx, R_p, R_px, R_pxx = _bicubic_jet(
             table, PROP_RHO, ip, jx, dp, dxi, tp, rx
@@ -451,7 +454,7 @@ def entropy_at(tables: PropertyTables, sat: SaturationPoint, p: float, h: float)
     if not (sat.inside and h >= sat.h_min and h <= sat.h_max):
         return NAN
     if h < h_l or h > h_v:
-        table, ip, jx, dp, dxi, tp, rx, _, _ = _single_phase(tables, sat, p, h)
+        table, ip, jx, dp, dxi, tp, rx, _, _ = _single_phase(tables, sat, h)
         return _bicubic_value(table, PROP_S, ip, jx, dp, dxi, tp, rx)
     s_l, _ = _sat_curve(tables, S_LIQ, i, width, t)
     s_v, _ = _sat_curve(tables, S_VAP, i, width, t)
@@ -472,8 +475,11 @@ def _along_xi_node(
 
 
 @njit(cache=True)
-def _invert_region(tables: PropertyTables, p: float, k: int, target: float, liquid: bool) -> float:
-    """The xi in [0, 1] of the liquid or vapour table where property k equals target at p.
+def _invert_region(
+    tables: PropertyTables, sat: SaturationPoint, k: int, target: float, liquid: bool
+) -> float:
+    """The xi in [0, 1] of the liquid or vapour table where property k equals target at the
+    pressure of ``sat``.
 
     Property k must increase with xi (T and s do); NaN when target lies outside its values at
     xi = 0 and xi = 1 (beyond round-off). At p the table is a cubic Hermite curve in xi: the
@@ -482,9 +488,8 @@ def _invert_region(tables: PropertyTables, p: float, k: int, target: float, liqu
     """
     table = tables.liquid if liquid else tables.vapour
     xi_nodes = tables.liquid_xi if liquid else tables.vapour_xi
-    ip = _interval(tables.table_p, p)
-    dp = tables.table_p[ip + 1] - tables.table_p[ip]
-    a00, a10, a01, a11, _, _, _, _ = _hermite_basis((p - tables.table_p[ip]) / dp)
+    ip, dp = sat.table_interval, sat.table_width
+    a00, a10, a01, a11, _, _, _, _ = _hermite_basis(sat.table_t)
     weights = (a00, a10 * dp, a01, a11 * dp)
     last = xi_nodes.size - 1
     f_lo = _along_xi_node(table, k, ip, 0, *weights)[0]
@@ -548,12 +553,12 @@ def _h_from_property(
         high, _ = _sat_curve(tables, S_VAP, sat.interval, sat.width, sat.t)
     h_l, h_v = sat.h_l, sat.h_v
     if target < low:
-        return sat.h_min + _invert_region(tables, p, k, target, True) * (h_l - sat.h_min)
+        return sat.h_min + _invert_region(tables, sat, k, target, True) * (h_l - sat.h_min)
     if target < high:
         return h_l + (target - low) / (high - low) * (h_v - h_l)
     if target == high:
         return h_v
-    return h_v + _invert_region(tables, p, k, target, False) * (sat.h_max - h_v)
+    return h_v + _invert_region(tables, sat, k, target, False) * (sat.h_max - h_v)
 
 
 @njit(cache=True)
