@@ -32,7 +32,7 @@ from scipy.optimize import brentq
 from pymc_vcc.physics.components.density import FILLET_MEMO_SHAPE, cell_state, cell_values
 from pymc_vcc.physics.parameters import ParameterIds, ParameterTable, declared_table
 from pymc_vcc.physics.records import make_record
-from pymc_vcc.physics.refrigerant import saturation_point, saturation_state
+from pymc_vcc.physics.refrigerant import saturation_point
 from pymc_vcc.physics.scratch import all_finite, stack_full, uncounted
 
 N_PROPERTIES = 5
@@ -516,5 +516,10 @@ def restore(y, work, j, zones, props, saved):
 def quality_enthalpy(tables, p, x):
     """Enthalpy at pressure ``p`` (Pa) and quality ``x`` (J/kg), extended linearly beyond the
     saturation lines for x < 0 or x > 1: the initial states' fill profiles use it."""
-    sat = saturation_state(tables, p)
-    return sat[1] + x * (sat[2] - sat[1])
+    return quality_enthalpy_at(saturation_point(tables, p), x)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def quality_enthalpy_at(sat, x):
+    """:func:`quality_enthalpy` given ``sat``, the saturation point of the pressure."""
+    return sat.h_l + x * (sat.h_v - sat.h_l)

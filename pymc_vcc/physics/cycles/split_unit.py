@@ -47,15 +47,16 @@ from pymc_vcc.physics.cycles.base import (
     OutputLayout,
     StateLayout,
     UnitDescription,
-    quality_enthalpy,
+    quality_enthalpy_at,
 )
 from pymc_vcc.physics.parameters import ParameterSpec, declared_table
 from pymc_vcc.physics.records import record_array
 from pymc_vcc.physics.refrigerant import (
     load_refrigerant,
     p_sat_from_T,
+    saturation_point,
     saturation_state,
-    state,
+    state_at,
     state_values_at,
 )
 
@@ -642,19 +643,19 @@ def filled_coils(s, p_c, p_e, at, tables):
     y = np.zeros(at.size)
     x_end = FILL_OUTLET_QUALITY + 0.45 * max(-s, 0.0)
     reach = 1.0 - 0.8 * min(max(s, 0.0), 1.0)
+    sat_c, sat_e = saturation_point(tables, p_c), saturation_point(tables, p_e)
     y[at.p_cond] = p_c
     for i in range(n):
         xi = (i + 0.5) / n
         x = max(1.05 - (1.05 - x_end) * xi / reach, x_end)
-        y[at.h_cond + i] = quality_enthalpy(tables, p_c, x)
-        y[at.Tw_cond + i] = state(tables, p_c, y[at.h_cond + i])[0]
-    y[at.h_liquid_line] = quality_enthalpy(tables, p_c, x_end)
+        y[at.h_cond + i] = quality_enthalpy_at(sat_c, x)
+        y[at.Tw_cond + i] = state_at(tables, sat_c, p_c, y[at.h_cond + i])[0]
+    y[at.h_liquid_line] = quality_enthalpy_at(sat_c, x_end)
     y[at.p_evap] = p_e
-    sat_e = saturation_state(tables, p_e)
-    x_in = (y[at.h_liquid_line] - sat_e[1]) / (sat_e[2] - sat_e[1])
+    x_in = (y[at.h_liquid_line] - sat_e.h_l) / (sat_e.h_v - sat_e.h_l)
     for i in range(n):
         xi = (i + 0.5) / n
-        y[at.h_evap + i] = quality_enthalpy(tables, p_e, x_in + (1.05 - x_in) * xi)
-        y[at.Tw_evap + i] = state(tables, p_e, y[at.h_evap + i])[0]
-    y[at.h_tank] = quality_enthalpy(tables, p_e, 1.05 - 1.1 * min(max(s - 1.0, 0.0), 1.0))
+        y[at.h_evap + i] = quality_enthalpy_at(sat_e, x_in + (1.05 - x_in) * xi)
+        y[at.Tw_evap + i] = state_at(tables, sat_e, p_e, y[at.h_evap + i])[0]
+    y[at.h_tank] = quality_enthalpy_at(sat_e, 1.05 - 1.1 * min(max(s - 1.0, 0.0), 1.0))
     return y

@@ -31,6 +31,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from pymc_vcc.physics.integration.stops import StopPlan, stop_plan
+from pymc_vcc.physics.scratch import all_finite, uncounted
 
 CV_BDF = 2
 CV_NORMAL = 1
@@ -240,7 +241,15 @@ def _add_counts(functions, memory, counts, totals):
         totals[k] += counts[k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _copy(source, target):
+    """``target[:] = source`` for 1-D arrays, elementwise (a slice assignment needs Numba's
+    reference counts)."""
+    for j in range(source.size):
+        target[j] = source[j]
+
+
+@uncounted
 def _advance(functions, memory, vector, reached, plan, first, last, out, counts, totals):
     """Call CVODE for stops ``first`` to ``last - 1`` of the :class:`StopPlan` ``plan`` in turn:
     at a segment's first stop write its inputs into ``plan.u``, put the state into its start
@@ -254,9 +263,9 @@ def _advance(functions, memory, vector, reached, plan, first, last, out, counts,
         if k >= 0:
             if k > 0:
                 _add_counts(functions, memory, counts, totals)
-            plan.u[:] = plan.held[k]
+            _copy(plan.held[k], plan.u)
             if plan.start_rows[k] >= 0:
-                out[plan.start_rows[k]] = y
+                _copy(y, out[plan.start_rows[k]])
             flag = _call_pointer_time_pointer(functions[1], memory, plan.edges[k], vector)
             if flag >= 0:
                 flag = _call_pointer_time(functions[2], memory, plan.edges[k + 1])
@@ -265,10 +274,10 @@ def _advance(functions, memory, vector, reached, plan, first, last, out, counts,
         flag = _call_cvode(functions[0], memory, plan.times[i], vector, reached)
         if flag < 0:
             return i, flag, True
-        if not np.isfinite(y).all():
+        if not all_finite(y):
             return i, flag, False
         if plan.rows[i] >= 0:
-            out[plan.rows[i]] = y
+            _copy(y, out[plan.rows[i]])
     return last, flag, True
 
 

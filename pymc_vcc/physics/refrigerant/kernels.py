@@ -37,6 +37,7 @@ from pymc_vcc.physics.refrigerant.tables import (
     VALUE,
     PropertyTables,
 )
+from pymc_vcc.physics.scratch import uncounted
 
 NAN = math.nan
 
@@ -269,7 +270,7 @@ def _in_range(tables: PropertyTables, p: float) -> bool:
     return p >= tables.p_min and p <= tables.p_max
 
 
-@njit(cache=True)
+@uncounted
 def saturation_point(tables: PropertyTables, p: float) -> SaturationPoint:
     """The :class:`SaturationPoint` of pressure ``p``; pass it to :func:`state_at` and
     :func:`density_h_derivatives_at` for every lookup at ``p``."""
