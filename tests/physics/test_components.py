@@ -23,7 +23,7 @@ from pymc_vcc.physics.components.density import (
 )
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature, fan_operating_point
-from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
+from pymc_vcc.physics.components.heat_exchanger import zone_derivatives, zone_pair_derivatives
 from pymc_vcc.physics.components.heat_transfer import (
     LIQUID_BLEND,
     air_effectiveness,
@@ -470,6 +470,28 @@ def test_zone_conserves_mass(tables, inflow, outflow):
     dp = zone_derivatives(volume, rho, rp, rh, h, source, inflow, outflow, 1e-4, dh)
     stored = np.sum(volume * (rp * dp + rh * dh))
     assert stored == pytest.approx(inflow - outflow, rel=1e-10, abs=1e-14)
+
+
+def test_zone_pair_is_each_zone_alone(tables):
+    """The two zones stepped in one loop give each zone's own numbers, bit for bit, whichever
+    is longer."""
+    high_h = np.array([4.4e5, 3.8e5, 2.9e5, 2.2e5, 2.1e5])
+    low_h = np.array([2.6e5, 3.0e5, 3.5e5, 4.0e5, 4.2e5, 4.25e5, 4.3e5])
+    high = (np.full(5, 1e-4), *_zone(tables, 2.7e6, high_h), high_h, np.linspace(-400, 0, 5))
+    low = (np.full(7, 2e-4), *_zone(tables, 1.0e6, low_h), low_h, np.linspace(300, 50, 7))
+    for first, second in ((high, low), (low, high)):
+        alone = [np.empty(z[4].size) for z in (first, second)]
+        expected = [
+            zone_derivatives(*first, 0.03, 0.02, 1e-4, alone[0]),
+            zone_derivatives(*second, 0.02, 0.03, 1e-4, alone[1]),
+        ]
+        paired = [np.empty(z[4].size) for z in (first, second)]
+        found = zone_pair_derivatives(
+            (*first, 0.03, 0.02, paired[0]), (*second, 0.02, 0.03, paired[1]), 1e-4
+        )
+        assert list(found) == expected
+        for a, b in zip(alone, paired, strict=True):
+            np.testing.assert_array_equal(a, b)
 
 
 def test_cell_density_is_c2_across_the_saturation_lines(tables):

@@ -41,7 +41,7 @@ from pymc_vcc.physics.components.compressor import compressor, protection_speed_
 from pymc_vcc.physics.components.density import FILLET_MEMO_SHAPE
 from pymc_vcc.physics.components.expansion_valve import valve_mass_flow
 from pymc_vcc.physics.components.fan import air_inlet_temperature
-from pymc_vcc.physics.components.heat_exchanger import zone_derivatives
+from pymc_vcc.physics.components.heat_exchanger import zone_pair_derivatives
 from pymc_vcc.physics.components.heat_transfer import (
     air_effectiveness,
     air_side_heat,
@@ -412,7 +412,7 @@ def zone_rates(y, c, props, flow, src_c, src_e, dydt):
     src_c[0] += (m_comp + smooth_pos(m_src, SRC_EPS)) * (h_d - h_zc[0])
     src_e[0] += upwind_weight(m_valve, FLOW_EPS) * m_valve * (h_zc[nc - 1] - h_ze[0])
     src_e[ne - 1] -= m_comp * (flow.h_suc - h_ze[ne - 1])
-    dydt[at.p_cond] = zone_derivatives(
+    high = (
         volumes[:nc],
         props[1, :nc],
         props[2, :nc],
@@ -421,10 +421,9 @@ def zone_rates(y, c, props, flow, src_c, src_e, dydt):
         src_c,
         m_comp + m_src,
         m_valve,
-        FLOW_EPS,
         dydt[at.p_cond + 1 : at.p_cond + 1 + nc],
     )
-    dydt[at.p_evap] = zone_derivatives(
+    low = (
         volumes[nc:],
         props[1, nc:],
         props[2, nc:],
@@ -433,9 +432,9 @@ def zone_rates(y, c, props, flow, src_c, src_e, dydt):
         src_e,
         m_valve,
         m_comp,
-        FLOW_EPS,
         dydt[at.p_evap + 1 : at.p_evap + 1 + ne],
     )
+    dydt[at.p_cond], dydt[at.p_evap] = zone_pair_derivatives(high, low, FLOW_EPS)
     dydt[at.z] = c.controller.m0 - flow.mass
 
 
