@@ -3,8 +3,8 @@
 For each solver of :data:`~pymc_vcc.physics.integration.solver.METHODS` (``_<solver>`` suffix):
 
 * ``sim_seconds_median``/``_min`` (wall) and ``sim_cpu_seconds_median`` (process CPU time, steadier
-  on a shared machine): one 1060 s simulation of the built-in profile at nominal parameters, one
-  process, after a warm-up run; its ``rhs_evals``, ``jac_evals`` and ``solver_steps``;
+  on a shared machine): one 1060 s simulation of the built-in profile at nominal parameters, in
+  a fresh process, after a warm-up run; its ``rhs_evals``, ``jac_evals`` and ``solver_steps``;
 * ``sims_per_second`` and ``failure_rate``: 1060 s simulations of uniform draws from the Table
   III box on all cores (a process pool), with the failure kinds counted, and
   ``sims_per_cpu_second`` (draws over the CPU time the workers spent on them: what one idle core
@@ -27,6 +27,7 @@ import multiprocessing
 import os
 import time
 from collections import Counter
+from collections.abc import Callable
 from statistics import median
 from typing import Any
 
@@ -90,6 +91,14 @@ def _nominal(solver: str, repeats: int) -> dict[str, float | int]:
         "source_integral_kg": float(attrs["source_integral"]),
         "n_states": int(attrs["n_states"]),
     }
+
+
+def _fresh[R](function: Callable[..., R], *arguments: Any) -> R:
+    """``function(*arguments)`` in a new process: a timing that no earlier run disturbs (after
+    Radau's runs OpenBLAS's threads spun on, and a CVODE run timed next took twice its wall
+    time in CPU)."""
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        return pool.apply(function, arguments)
 
 
 def _model_costs() -> dict[str, float]:
@@ -160,7 +169,7 @@ def run(quick: bool) -> dict[str, float | int | str]:
     }
     per_solver = {}
     for solver in METHODS:
-        figures = _nominal(solver, 5 if quick else 7) | _sweep(solver, draws, workers)
+        figures = _fresh(_nominal, solver, 5 if quick else 7) | _sweep(solver, draws, workers)
         per_solver[solver] = figures
         results |= {f"{key}_{solver}": value for key, value in figures.items()}
     reference = per_solver["radau"]["sim_seconds_median"]
