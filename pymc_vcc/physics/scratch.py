@@ -131,9 +131,11 @@ def _stack_full(typingctx, shape, value):
 
 
 uncounted = njit(cache=True, error_model="numpy", _nrt=False)  # type: ignore[call-overload]
-"""Compile a kernel, and what it calls when compiled for it, with no reference counts (Numba's
-``_nrt`` flag): it may not allocate (Numba refuses to compile one that does) and must return no
-array (a caller that counts would give up a reference it was never given)."""
+"""Compile a kernel with no reference counts (Numba's ``_nrt`` flag): it may not allocate (Numba
+refuses to compile one that does) and must return no array (a caller that counts would give up a
+reference it was never given). The kernels it calls keep their own counts: one called in the
+right-hand side's loops is marked itself (the saturation point's counts were 1.5 % of a run),
+and it must not call one that returns an array (that reference would never be given back)."""
 
 
 @njit(cache=True, error_model="numpy", inline="always")

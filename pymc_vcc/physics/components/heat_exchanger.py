@@ -74,6 +74,7 @@ def _close(outflow, flow):
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _add_pressure_term(dh_dt, beta, dp_dt):
+    """dh/dt = alpha + beta dp/dt, in place (``dh_dt`` holds the alphas)."""
     for i in range(dh_dt.size):
         dh_dt[i] += beta[i] * dp_dt
 
