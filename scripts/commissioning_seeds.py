@@ -4,9 +4,9 @@ mean moves between seeds by more than its own sd is the sampler's, not the recor
 
     .venv/bin/python scripts/commissioning_seeds.py UNIT_SEED [UNIT_SEED ...] --seeds 0 1 2
 
-Each unit is the benchmark's (``pymc-vcc validate --faults all``: the ``all`` variant of that
-seed, its charge drawn as the benchmark draws it), calibrated by ``calibrate_record`` at the
-``small`` budget on 2 worker processes with the CVODE solver.
+Each unit is the benchmark's (``pymc-vcc validate --faults all``: ``benchmark_unit``),
+commissioned as the benchmark commissions it (``commission``: the ``small`` budget, the CVODE
+solver) on 2 worker processes.
 """
 
 from __future__ import annotations
@@ -18,10 +18,8 @@ import numpy as np
 
 from pymc_vcc.execution.executors import make_executor
 from pymc_vcc.physics.unit import load_unit
-from pymc_vcc.studies.fault_benchmark import UNIT_CHARGES
+from pymc_vcc.studies.fault_benchmark import benchmark_unit, commission
 from pymc_vcc.studies.faults import coil_conductance
-from pymc_vcc.studies.truths import generate_truth
-from pymc_vcc.studies.unit_log import RECORD_BUDGETS, calibrate_record
 
 
 def main() -> None:
@@ -30,24 +28,14 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     args = parser.parse_args()
     unit = load_unit()
-    draws, error_draws = RECORD_BUDGETS["small"]
     with make_executor("processes", 2) as executor:
         for unit_seed in args.units:
-            charge = float(np.random.default_rng(unit_seed).uniform(*UNIT_CHARGES))
-            healthy = generate_truth("all", unit_seed, charge=charge)
+            healthy = benchmark_unit("all", unit_seed)
             truth = {name: np.array([value]) for name, value in healthy.parameters.items()}
             true_conductance = coil_conductance("condenser", unit, truth)[0]
             for seed in args.seeds:
                 started = time.perf_counter()
-                tree = calibrate_record(
-                    healthy.observed,
-                    healthy.inputs,
-                    executor,
-                    draws=draws,
-                    error_draws=error_draws,
-                    seed=seed,
-                    solver="cvode",
-                )
+                tree = commission(healthy, executor, seed=seed)
                 posterior = tree["posterior"]
                 draws_of = {
                     name: posterior[name].values.ravel()
@@ -60,7 +48,7 @@ def main() -> None:
                 print(
                     f"unit {unit_seed} seed {seed}: condenser UA true {true_conductance:.0f} W/K,"
                     f" read {conductance.mean():.0f} ± {conductance.std():.0f} (z {z:+.1f});"
-                    f" M0 true {charge:.3f} kg, read {m0.mean():.3f} ± {m0.std():.3f};"
+                    f" M0 true {healthy.charge:.3f} kg, read {m0.mean():.3f} ± {m0.std():.3f};"
                     f" {time.perf_counter() - started:.0f} s",
                     flush=True,
                 )

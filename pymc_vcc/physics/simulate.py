@@ -213,16 +213,13 @@ class Simulation:
 
         names = list(self.template.data_vars)
         done = np.isfinite(on_grid.sum(axis=1))  # a state of ~1e7 at most: no overflow
+        reached = slice(None) if done.all() else done  # a finished run's rows: views, no copies
+        evaluated = np.full((times.size, model.n_eval), np.nan)
         mass_error = source_integral = float("nan")
-        if done.all():  # a finished run: no copies of the rows reached
-            evaluated = model.outputs_along(on_grid, self.controls, c, tables, self.diagnostics)
-        else:
-            evaluated = np.full((times.size, model.n_eval), np.nan)
-            if done.any():
-                evaluated[done] = model.outputs_along(
-                    on_grid[done], self.controls[done], c, tables, self.diagnostics
-                )
         if done.any():
+            evaluated[reached] = model.outputs_along(
+                on_grid[reached], self.controls[reached], c, tables, self.diagnostics
+            )
             charge = model.charge(c)
             at = model.outputs.offsets
             mass_error = float(np.max(np.abs(evaluated[done, at.M] - charge)) / charge)

@@ -35,11 +35,18 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from pymc_vcc.execution.executors import Executor
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import diagnose
 from pymc_vcc.studies.faults import FAULTS
-from pymc_vcc.studies.truths import VARIANTS, generate_truth, record_again, worn_parameters
+from pymc_vcc.studies.truths import (
+    VARIANTS,
+    Truth,
+    generate_truth,
+    record_again,
+    worn_parameters,
+)
 from pymc_vcc.studies.unit_log import (
     ALARM_PROBABILITY,
     RECORD_BUDGETS,
@@ -284,8 +291,7 @@ def fault_benchmark(
             runs += [done[key] for key in keys if key in done]
             if all(key in done for key in keys):
                 continue
-            charge = float(np.random.default_rng(seed).uniform(*UNIT_CHARGES))
-            healthy = generate_truth(variant, seed, charge=charge)
+            healthy = benchmark_unit(variant, seed)
             commissioning = _commissioned(healthy, seed, executor, settings, budget, coils, log)
             for n, (case, key) in enumerate(zip(cases, keys, strict=True)):
                 if key in done:
@@ -308,7 +314,7 @@ def fault_benchmark(
                     "case": key[1],
                     "unit_seed": seed,
                     "variant": variant,
-                    "truth_kg": charge,
+                    "truth_kg": healthy.charge,
                     "budget": budget,
                     "seconds": time.perf_counter() - case_started,
                 }
@@ -324,25 +330,47 @@ def fault_benchmark(
     return result
 
 
+def benchmark_unit(variant: str, seed: int) -> Truth:
+    """Unit ``seed`` of the benchmark: a truth of ``variant`` whose charge is drawn uniformly
+    in :data:`UNIT_CHARGES` by ``seed``."""
+    charge = float(np.random.default_rng(seed).uniform(*UNIT_CHARGES))
+    return generate_truth(variant, seed, charge=charge)
+
+
+def commission(
+    healthy: Truth,
+    executor: Executor,
+    budget: str = "small",
+    seed: int = 0,
+    solver: str = "cvode",
+    coils: str = "finer",
+) -> xr.DataTree:
+    """The commissioning posterior of a unit's healthy record, calibrated as the benchmark does
+    (:func:`~pymc_vcc.studies.unit_log.calibrate_record` at ``budget``'s particles and
+    model-error draws, :data:`~pymc_vcc.studies.unit_log.RECORD_BUDGETS`; ``seed`` seeds it)."""
+    draws, error_draws = RECORD_BUDGETS[budget]
+    return calibrate_record(
+        healthy.observed,
+        healthy.inputs,
+        executor,
+        draws=draws,
+        error_draws=error_draws,
+        seed=seed,
+        solver=solver,
+        coils=coils,
+    )
+
+
 def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.DataTree:
-    """The commissioning posterior of a unit's healthy record, kept beside the checkpoint."""
+    """:func:`commission` of a unit, kept beside the checkpoint."""
     from pymc_vcc.studies.common import write_netcdf
 
     unit = f"unit-{seed}-{healthy.variant}-{healthy.charge:.4f}kg-{budget}"
     kept = None if log is None else log.with_name(f"{log.stem}-{unit}.nc")
     if kept is not None and kept.is_file():
         return xr.open_datatree(kept, engine="h5netcdf")
-    draws, error_draws = RECORD_BUDGETS[budget]
-    tree = calibrate_record(
-        healthy.observed,
-        healthy.inputs,
-        executor,
-        draws=draws,
-        error_draws=error_draws,
-        seed=settings.seed,
-        solver=settings.solver or "cvode",
-        coils=coils,
-    )
+    solver = settings.solver or "cvode"
+    tree = commission(healthy, executor, budget, settings.seed, solver, coils)
     if kept is not None:
         write_netcdf(tree, kept)
     return tree
@@ -351,7 +379,9 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.D
 __all__ = [
     "CASES",
     "FaultBenchmarkResult",
+    "benchmark_unit",
     "case_label",
+    "commission",
     "fault_benchmark",
     "score",
     "summarise_cases",
