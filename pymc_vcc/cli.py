@@ -101,6 +101,7 @@ def _diagnose(args: argparse.Namespace) -> int:
         rounds=args.rounds,
         method=args.method,
         fault_probability=args.fault_probability,
+        model_form=args.model_form,
     )
     n_simulations = int(result.tree["sample_stats"]["n_simulations"])
     return _report(
@@ -653,7 +654,7 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="the folder (or posterior.nc) written by `pymc-vcc calibrate` at commissioning",
     )
-    from pymc_vcc.studies.faults import FAULT_PROBABILITY
+    from pymc_vcc.studies.faults import FAULT_PROBABILITY, MODEL_FORM
 
     diagnose.add_argument(
         "--fault-probability",
@@ -661,6 +662,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=FAULT_PROBABILITY,
         help="each fault's prior probability since commissioning, in (0, 1) (default "
         f"{FAULT_PROBABILITY})",
+    )
+    diagnose.add_argument(
+        "--model-form",
+        type=float,
+        default=MODEL_FORM,
+        help="relative sd of the model's reading of a fault's intensity on a unit that is not "
+        f"the model, >= 0 (default {MODEL_FORM}: measured on the fault benchmark; 0: the "
+        "model's reading alone)",
     )
     _add_study_options(diagnose, "results/diagnose", "small")
     _add_record_options(diagnose)

@@ -6,7 +6,8 @@ the unit as commissioned, and with a small probability each fault's parameters a
 their ranges (the cycle's fault parameters, ``unit.faults``: a liquid-line restriction,
 non-condensable gas, leaking compressor valves, added near 0). Each fault of
 :data:`~pymc_vcc.studies.faults.FAULTS` then has an *intensity* relative to commissioning per
-posterior draw (:func:`~pymc_vcc.studies.faults.fault_intensities`). Its posterior probability
+posterior draw (:func:`~pymc_vcc.studies.faults.fault_intensities`), spread by the model's form
+error (:func:`~pymc_vcc.studies.faults.with_model_form`). Its posterior probability
 of lying beyond the fault's threshold names it (:data:`NAMED`); two faults that together are
 likely but neither alone are reported as not distinguishable, with the sensor that would tell
 them apart (:func:`separating_sensor`).
@@ -37,9 +38,12 @@ from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.faults import (
     FAULT_PROBABILITY,
     FAULTS,
+    MODEL_FORM,
     Fault,
     check_fault_probability,
+    check_model_form,
     fault_intensities,
+    with_model_form,
 )
 from pymc_vcc.studies.record_budget import CHARGE, held_inputs, plateau_edges
 from pymc_vcc.studies.unit_log import (
@@ -61,7 +65,8 @@ class Diagnosis:
     Attributes:
         tree: the posterior DataTree of the later record (the parameters, fault parameters
             included).
-        intensities: fault name -> its posterior draws of intensity.
+        intensities: fault name -> its posterior draws of intensity, the model's form error
+            included (:func:`~pymc_vcc.studies.faults.with_model_form`).
         probabilities: fault name -> P(intensity beyond its threshold).
         verdict: ``no fault``, ``<fault>``, ``several: ...`` or ``<fault> / <fault>: not
             distinguishable with these sensors``.
@@ -71,6 +76,9 @@ class Diagnosis:
         unreproduced: the outputs the model could not reproduce at commissioning (its
             predictive check failed there: :func:`commissioning_misfits`); the intensities
             are read against a commissioning that misses them.
+        model_intensities: fault name -> the intensity draws as the model reads them, before
+            its form error.
+        model_form: the form error's relative sd in :attr:`intensities`.
     """
 
     tree: xr.DataTree
@@ -80,6 +88,8 @@ class Diagnosis:
     confusions: list[tuple[str, str, str]] = field(default_factory=list)
     commissioned: dict[str, float] = field(default_factory=dict)
     unreproduced: list[str] = field(default_factory=list)
+    model_intensities: dict[str, np.ndarray] = field(default_factory=dict)
+    model_form: float = 0.0
 
     def summary(self) -> dict:
         """The JSON summary: per fault its intensity (mean, 95 % interval) and probability."""
@@ -102,6 +112,7 @@ class Diagnosis:
             "confusions": [list(c) for c in self.confusions],
             "charge_change_kg": float(charge.mean() - self.commissioned[CHARGE]),
             "commissioning_unreproduced": self.unreproduced,
+            "model_form": self.model_form,
         }
 
     def plot(self) -> Figure:
@@ -136,6 +147,11 @@ class Diagnosis:
             lines.append(
                 f"{fault.name:<42} {interval:>32}  {fault.threshold * factor:>7.0f} {unit:<3}"
                 f"{self.probabilities[fault.name]:8.2f}"
+            )
+        if self.model_form > 0:
+            lines.append(
+                f"(intervals and probabilities include the model's form error: "
+                f"±{100 * self.model_form:.0f} % of each intensity, 1 sd)"
             )
         for first, second, advice in self.confusions:
             lines.append(
@@ -265,6 +281,7 @@ def diagnose(
     method: str = "likelihood",
     accuracy: SensorAccuracy | None = None,
     fault_probability: float = FAULT_PROBABILITY,
+    model_form: float = MODEL_FORM,
 ) -> Diagnosis:
     """Diagnose a later record of a unit against its commissioning posterior.
 
@@ -284,8 +301,11 @@ def diagnose(
         accuracy: the sensors' accuracy.
         fault_probability: each fault's prior probability
             (:func:`~pymc_vcc.studies.unit_log.later_prior`).
+        model_form: the relative sd of the model's reading of an intensity
+            (:data:`~pymc_vcc.studies.faults.MODEL_FORM`; 0: the model's reading alone).
     """
     check_fault_probability(fault_probability)
+    check_model_form(model_form)
     unit = load_unit() if unit is None else unit
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
@@ -321,7 +341,8 @@ def diagnose(
         accuracy=accuracy,
     )
     samples = {str(n): tree["posterior"][n].values.ravel() for n in tree["posterior"].data_vars}
-    intensities = fault_intensities(samples, posterior, unit, seed)
+    read = fault_intensities(samples, posterior, unit, seed)
+    intensities = with_model_form(read, seed, model_form)
     probabilities = {f.name: float(np.mean(intensities[f.name] >= f.threshold)) for f in FAULTS}
     text, pairs = verdict(probabilities)
     by_name = {f.name: f for f in FAULTS}
@@ -348,7 +369,17 @@ def diagnose(
             else f"a {sensor} sensor would tell them apart"
         )
         confusions.append((a, b, advice))
-    return Diagnosis(tree, intensities, probabilities, text, confusions, commissioned, unreproduced)
+    return Diagnosis(
+        tree,
+        intensities,
+        probabilities,
+        text,
+        confusions,
+        commissioned,
+        unreproduced,
+        model_intensities=read,
+        model_form=model_form,
+    )
 
 
 def diagnose_study(
@@ -363,6 +394,7 @@ def diagnose_study(
     rounds: int = 1,
     method: str = "likelihood",
     fault_probability: float = FAULT_PROBABILITY,
+    model_form: float = MODEL_FORM,
 ) -> Diagnosis:
     """``pymc-vcc diagnose LOG --prior COMMISSIONING``: load and check the log and the
     commissioning posterior before any simulation, diagnose, and write the posterior, the
@@ -374,7 +406,8 @@ def diagnose_study(
         commissioning: the folder (or ``posterior.nc``) of the healthy unit's calibration.
         column_map: the log's column map (default: ``LOG.columns.toml`` beside it).
         unit: the unit description (default: the built-in split unit).
-        drift, coils, rounds, method, fault_probability: as for :func:`diagnose`.
+        drift, coils, rounds, method, fault_probability, model_form: as for
+            :func:`diagnose`.
     """
     from pymc_vcc.io.measurements import load_log
     from pymc_vcc.physics.simulate import OUTPUT_INTERVAL
@@ -389,6 +422,7 @@ def diagnose_study(
 
     check_drift(drift)
     check_fault_probability(fault_probability)
+    check_model_form(model_form)
     budget = record_budget_name(settings)
     unit = unit or load_unit()
     measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
@@ -408,6 +442,7 @@ def diagnose_study(
             rounds=rounds,
             method=method,
             fault_probability=fault_probability,
+            model_form=model_form,
         )
         if settings.out is not None:
             write_netcdf(result.tree, settings.out / POSTERIOR_FILE)

@@ -15,7 +15,9 @@ each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A cas
   sure (two faults not distinguishable, or only possible ones);
 
 with the severity error (|posterior mean intensity − true intensity| / true intensity) and
-whether the 95 % interval of the intensity covers the truth. The leak alarm of ``pymc-vcc leak
+whether the 95 % interval of the intensity covers the truth; the model's own reading (before
+its form error) is kept too, from which :func:`model_form_needed` measures the form error the
+cases ask for. The leak alarm of ``pymc-vcc leak
 LOG --prior`` (the same prior and calibration: :func:`~pymc_vcc.studies.unit_log.leak_alarm`)
 is the undercharge's probability; its false alarms on the no-fault cases and its detection per
 charge loss are scored too.
@@ -106,7 +108,8 @@ class FaultBenchmarkResult:
             f"{t['misdiagnosis_rate']:.2f}, missed detection {t['missed_rate']:.2f}, no response "
             f"{t['no_response_rate']:.2f}",
             f"severity error (median): {t['median_severity_error']:.2f} of the intensity; "
-            f"intensity inside its 95 % interval: {t['intensity_coverage']:.2f}",
+            f"intensity inside its 95 % interval: {t['intensity_coverage']:.2f}; the model's form "
+            f"error these cases ask for (95 %): {t['model_form_needed']:.3f}",
             f"leak alarm (P(charge 10 % low) > {ALARM_PROBABILITY}): false alarms "
             f"{t['leak_false_alarm_rate']:.2f} of the no-fault cases; detection "
             + ", ".join(f"{p:.2f} at a {100 * loss:.0f} % loss" for loss, p in t["leak_detection"]),
@@ -159,14 +162,53 @@ def _case_row(fault_name: str | None, intensity: float, diagnosis) -> dict:
     if fault_name is not None:
         draws = diagnosis.intensities[fault_name]
         low, high = np.quantile(draws, [0.025, 0.975])
+        read = diagnosis.model_intensities[fault_name]
         row |= {
             "intensity_mean": float(draws.mean()),
             "intensity_low": float(low),
             "intensity_high": float(high),
             "severity_error": abs(float(draws.mean()) - intensity) / intensity,
             "covered": bool(low <= intensity <= high),
+            "model_mean": float(read.mean()),
+            "model_sd": float(read.std()),
+            "model_form": diagnosis.model_form,
         }
     return row
+
+
+def model_form_needed(rows: Sequence[dict], coverage: float = 0.95) -> float:
+    """The model's form error (relative sd, :data:`~pymc_vcc.studies.faults.MODEL_FORM`) at
+    which the faulted cases' intensity intervals cover their truths at ``coverage``: the split
+    conformal quantile of the spread each case needs, sqrt(((m − t)/z)² − s²)/|m| (0 when its
+    model's reading covers alone), of the model's mean m and sd s and the truth t, z the
+    normal quantile of ``coverage`` (a case needing more than any is ``inf``).
+
+    Args:
+        rows: the cases' rows as :func:`fault_benchmark` keeps them (rows of runs before the
+            form error was drawn give the model's reading as ``intensity_mean`` and their 95 %
+            interval).
+        coverage: the intervals' aim, in (0, 1).
+    """
+    from scipy.stats import norm
+
+    if not 0.0 < coverage < 1.0:
+        raise ValueError(f"coverage must lie in (0, 1), got {coverage}")
+    z = float(norm.ppf(0.5 + coverage / 2))
+    needed = []
+    for row in rows:
+        if row["fault"] is None:
+            continue
+        if "model_mean" in row:
+            mean, sd = row["model_mean"], row["model_sd"]
+        else:
+            mean = row["intensity_mean"]
+            sd = (row["intensity_high"] - row["intensity_low"]) / (2 * 1.96)
+        miss = (mean - row["true_intensity"]) / z
+        needed.append(np.sqrt(max(0.0, miss**2 - sd**2)) / abs(mean))
+    if not needed:
+        return float("nan")
+    rank = int(np.ceil((len(needed) + 1) * coverage))
+    return float(np.sort(needed)[rank - 1]) if rank <= len(needed) else float("inf")
 
 
 def _faulted(
@@ -244,6 +286,7 @@ def summarise_cases(rows: Sequence[dict]) -> dict:
             (size, statistics.fmean(alarmed(r) for r in leaks if loss(r) == size))
             for size in sorted({loss(r) for r in leaks})
         ],
+        "model_form_needed": model_form_needed(rows),
         "simulations": statistics.fmean(r["simulations"] for r in rows),
         "seconds": statistics.median(r["seconds"] for r in rows),
         "by_fault": by_fault,
@@ -383,6 +426,7 @@ __all__ = [
     "case_label",
     "commission",
     "fault_benchmark",
+    "model_form_needed",
     "score",
     "summarise_cases",
 ]

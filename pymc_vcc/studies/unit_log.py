@@ -57,6 +57,7 @@ from pymc_vcc.studies.faults import (
     check_fault_probability,
     fault_intensities,
     moved_parameters,
+    with_model_form,
 )
 from pymc_vcc.studies.record_budget import (
     CHARGE,
@@ -684,10 +685,12 @@ def leak_alarm(
     """The leak alarm's probability: that the charge of a later record's posterior is below
     ``fraction`` of the commissioned one, each draw paired with a commissioning draw (the
     undercharge's intensity beyond 1 − ``fraction``,
-    :func:`~pymc_vcc.studies.faults.fault_intensities`)."""
+    :func:`~pymc_vcc.studies.faults.fault_intensities`; the model's form error included,
+    :func:`~pymc_vcc.studies.faults.with_model_form`)."""
     draws = {str(n): later["posterior"][n].values.ravel() for n in later["posterior"].data_vars}
     undercharge = next(fault for fault in FAULTS if fault.name == "undercharge")
-    loss = fault_intensities(draws, commissioning["posterior"], unit, seed, [undercharge])
+    read = fault_intensities(draws, commissioning["posterior"], unit, seed, [undercharge])
+    loss = with_model_form(read, seed)
     return float(np.mean(loss[undercharge.name] >= 1.0 - fraction))
 
 

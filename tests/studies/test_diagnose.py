@@ -103,22 +103,64 @@ def test_a_commissioning_posterior_without_the_moved_parameters_is_refused_in_on
 
 
 def test_the_leak_alarm_is_the_undercharge_beyond_its_fraction_paired_with_commissioning():
-    """Each later draw against a commissioning draw: a charge 15 % below every commissioning
-    draw sounds the alarm at 0.9 for sure, 5 % below never, and against a commissioning
-    posterior spread ±19 % a later charge at its mean sounds it as often as the commissioning
-    draws lie 11 % or more above it (about a fifth: not 0, as against the mean alone)."""
+    """Each later draw against a commissioning draw, the loss read with the model's form
+    error: a charge 15 % below every commissioning draw sounds the alarm at 0.9 unless the
+    form error reads it a third short (P = Φ(0.05 / (0.15 × 0.15)) = 0.987), 5 % below never,
+    and against a commissioning posterior spread ±19 % a later charge at its mean sounds it
+    about as often as the commissioning draws lie 11 % or more above it (about a fifth: not 0,
+    as against the mean alone)."""
+    from scipy.stats import norm
+
     from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.faults import MODEL_FORM
     from pymc_vcc.studies.unit_log import leak_alarm
 
     unit = load_unit()
     pinned = _posterior({"M0": [1.6] * 100})
-    assert leak_alarm(_posterior({"M0": [1.6 * 0.85] * 400}), pinned, unit, 0.9, 0) == 1.0
+    alarm = leak_alarm(_posterior({"M0": [1.6 * 0.85] * 4000}), pinned, unit, 0.9, 0)
+    assert alarm == pytest.approx(norm.cdf(0.05 / (0.15 * MODEL_FORM)), abs=0.005)
     assert leak_alarm(_posterior({"M0": [1.6 * 0.95] * 400}), pinned, unit, 0.9, 0) == 0.0
     commissioned = np.linspace(1.3, 1.9, 101)
     alarm = leak_alarm(_posterior({"M0": [1.6] * 4000}), _posterior({"M0": commissioned}), unit,
                        0.9, 0)  # fmt: skip
-    assert alarm == pytest.approx(np.mean(commissioned >= 1.6 / 0.9), abs=0.03)
+    assert alarm == pytest.approx(np.mean(commissioned >= 1.6 / 0.9), abs=0.04)
     assert alarm > 0.15
+
+
+def test_the_model_form_spreads_each_intensity_in_proportion_and_zero_leaves_it():
+    """Each draw times 1 + N(0, spread²): a fault read at 0.3 for sure spreads to sd 0.3 ×
+    spread around 0.3; a reading of 0 stays 0; spread 0 is the model's reading; a negative or
+    not finite spread is refused in one line."""
+    from pymc_vcc.studies.faults import with_model_form
+
+    read = {"a": np.full(20000, 0.3), "b": np.zeros(20000)}
+    spread = with_model_form(read, 0, 0.15)
+    assert spread["a"].mean() == pytest.approx(0.3, abs=0.002)
+    assert spread["a"].std() == pytest.approx(0.3 * 0.15, rel=0.03)
+    assert np.all(spread["b"] == 0.0)
+    assert np.array_equal(with_model_form(read, 0, 0.0)["a"], read["a"])
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(ValueError, match="model form spread") as e:
+            with_model_form(read, 0, bad)
+        assert "\n" not in str(e.value)
+
+
+def test_the_model_form_needed_is_the_conformal_quantile_of_each_cases_spread():
+    """A case the model covers alone needs 0; one read at 0.2 ± 0.01 for 0.3 needs
+    sqrt((0.1/1.96)² − 0.01²)/0.2 = 0.25; of 39 cases needing 0 and that one, the 95 %
+    quantile (rank ⌈41 × 0.95⌉ = 39) is 0, of 18 and two such cases (rank 20 of 20) 0.25;
+    five cases cannot vouch for 99 % (rank 6 of 5: infinite); healthy cases are not counted."""
+    from pymc_vcc.studies.fault_benchmark import model_form_needed
+
+    def case(mean, sd, truth):
+        return {"fault": "x", "model_mean": mean, "model_sd": sd, "true_intensity": truth}
+
+    good, bad = case(0.3, 0.02, 0.31), case(0.2, 0.01, 0.3)
+    healthy = {"fault": None}
+    assert model_form_needed([good] * 39 + [bad, healthy]) == 0.0
+    needed = np.sqrt((0.1 / 1.959964) ** 2 - 0.01**2) / 0.2
+    assert model_form_needed([good] * 18 + [bad] * 2) == pytest.approx(needed)
+    assert model_form_needed([good] * 5, coverage=0.99) == float("inf")
 
 
 def test_verdict_names_one_several_none_or_the_pair_it_cannot_separate():
@@ -162,6 +204,9 @@ def test_a_commissioning_the_model_missed_is_named_in_the_report():
         unreproduced=["PD", "TS"],
     )
     assert "could not reproduce PD, TS" in diagnosis.format_table().splitlines()[-1]
+    assert "form error" not in diagnosis.format_table()  # the model's reading alone
+    diagnosis.model_form = 0.15
+    assert "the model's form error: ±15 % of each intensity" in diagnosis.format_table()
     assert diagnosis.summary()["commissioning_unreproduced"] == ["PD", "TS"]
 
 
@@ -198,10 +243,13 @@ def test_score_table_counts_rates_among_healthy_and_faulted_cases():
     ]  # fmt: skip
     for row, p_leak in zip(rows, [0.6, 0.1, 0.0, 0.0], strict=True):
         row |= {"true_intensity": 0.0, "probabilities": {"undercharge": p_leak}}
+        row |= {"model_mean": 0.0, "model_sd": 0.0} if row["fault"] is None else {}
+    rows[2] |= {"model_mean": 0.1, "model_sd": 0.05}  # covers 0 alone
+    rows[3] |= {"model_mean": 0.2, "model_sd": 0.0}  # needs 1 / 1.96
     leaks = [  # the leak alarm: the undercharge's probability above 0.5, per loss
         {"fault": "undercharge", "score": "correct diagnosis", "severity_error": 0.1,
          "covered": True, "simulations": 200, "seconds": 3.0, "true_intensity": loss,
-         "probabilities": {"undercharge": p}}
+         "probabilities": {"undercharge": p}, "model_mean": loss, "model_sd": 0.01}
         for loss, p in ((0.19999999999999996, 0.99), (0.20000000000000007, 0.4), (0.3, 1.0))
     ]  # fmt: skip
     with_leaks = summarise_cases(rows + leaks)
@@ -212,6 +260,8 @@ def test_score_table_counts_rates_among_healthy_and_faulted_cases():
     assert table["missed_rate"] == 0.5 and table["misdiagnosis_rate"] == 0.0
     assert table["median_severity_error"] == pytest.approx(0.3)
     assert table["intensity_coverage"] == 0.5 and table["simulations"] == 150
+    assert table["model_form_needed"] == float("inf")  # two cases cannot vouch for 95 %
+    assert summarise_cases(rows * 10)["model_form_needed"] == pytest.approx(1 / 1.959964)
     assert table["by_fault"][gas] == {
         "cases": 2, "correct": 0.5, "severity_error": pytest.approx(0.3), "covered": 0.5
     }  # fmt: skip
@@ -278,6 +328,16 @@ def test_a_fault_probability_outside_zero_one_is_refused_before_any_work():
 
     with pytest.raises(ValueError, match=r"fault probability must lie in \(0, 1\), got 0.0"):
         diagnose(None, None, None, None, fault_probability=0.0)  # type: ignore[arg-type]
+
+
+def test_a_negative_model_form_is_refused_through_the_cli_before_any_work(tmp_path, capsys):
+    from pymc_vcc.cli import main
+
+    code = main(["diagnose", "no-such.csv", "--prior", "none", "--model-form", "-0.1",
+                 "--out", str(tmp_path / "d")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code != 0 and "model form spread must be a finite fraction >= 0, got -0.1" in err
+    assert len(err.splitlines()) == 1 and not (tmp_path / "d").exists()
 
 
 def test_a_unit_heating_is_refused_in_one_line_before_any_work():
