@@ -47,6 +47,7 @@ def _summary(rows: list[dict]) -> str:
         f"| median severity error (of the intensity) | {t['median_severity_error']:.2f} |",
         f"| true intensity inside its 95 % interval | {100 * t['intensity_coverage']:.0f} % "
         f"({sum(r['covered'] for r in faulted)} of {len(faulted)}) |",
+        f"| the model's form error these cases ask for (95 %) | {t['model_form_needed']:.3f} |",
         f"| leak alarm: false alarms (of the no-fault cases) | "
         f"{100 * t['leak_false_alarm_rate']:.0f} % |",
     ]
