@@ -273,6 +273,7 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     recomputes nothing (the rows and the commissioning posterior are kept)."""
     from pymc_vcc.studies import StudySettings
     from pymc_vcc.studies.fault_benchmark import fault_benchmark
+    from pymc_vcc.studies.faults import MODEL_FORM
 
     cases = [(None, {}), ("non-condensable gas", {"P_NCG": 150e3})]
     settings = StudySettings(budget="smoke", out=tmp_path / "faults", n_workers=2)
@@ -281,6 +282,8 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     gas = first.runs[1]
     assert gas["true_intensity"] == 150e3
     assert gas["intensity_low"] <= gas["intensity_mean"] <= gas["intensity_high"]
+    # the row keeps the model's own reading too, from which the form error is measured
+    assert gas["model_form"] == MODEL_FORM and gas["model_sd"] > 0
     assert gas["score"] in ("correct diagnosis", "misdiagnosis", "missed detection", "no response")
     kept = list((tmp_path / "faults" / "checkpoints").glob("validate-faults-unit-*.nc"))
     assert len(kept) == 1
