@@ -187,7 +187,7 @@ def _case_row(fault_name: str | None, intensity: float, diagnosis) -> dict:
 def model_form_needed(rows: Sequence[dict], coverage: float = 0.95) -> float:
     """The model's form error (relative sd, :data:`~pymc_vcc.studies.faults.MODEL_FORM`) at
     which the faulted cases' intensity intervals cover their truths at ``coverage``: the split
-    conformal quantile of the spread each case needs, sqrt(((m − t)/z)² − s²)/|m| (0 when its
+    conformal quantile of the spread each case needs, sqrt(((m − t)/z)² − s²)/abs(m) (0 when its
     model's reading covers alone), of the model's mean m and sd s and the truth t, z the
     normal quantile of ``coverage`` (a case needing more than any is ``inf``).
 

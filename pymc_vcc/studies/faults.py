@@ -167,7 +167,7 @@ def check_model_form(spread: float) -> None:
 def with_model_form(
     intensities: Mapping[str, np.ndarray], seed: int, spread: float = MODEL_FORM
 ) -> dict[str, np.ndarray]:
-    """Each fault's intensity draws, each multiplied by 1 + N(0, ``spread``²): the model's
+    """Each fault's intensity draws, each multiplied by 1 + N(0, s²), s = ``spread``: the model's
     reading of an intensity marginalised over its form error (:data:`MODEL_FORM`).
 
     Args:
