@@ -17,10 +17,9 @@ each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A cas
 with the severity error (|posterior mean intensity − true intensity| / true intensity) and
 whether the 95 % interval of the intensity covers the truth; the model's own reading (before
 its form error) is kept too, from which :func:`model_form_needed` measures the form error the
-cases ask for. The leak alarm of ``pymc-vcc leak
-LOG --prior`` (the same prior and calibration: :func:`~pymc_vcc.studies.unit_log.leak_alarm`)
-is the undercharge's probability; its false alarms on the no-fault cases and its detection per
-charge loss are scored too.
+cases ask for. The leak alarm of ``pymc-vcc leak LOG --prior`` (the same prior and calibration:
+:func:`~pymc_vcc.studies.unit_log.leak_alarm`) is the undercharge's probability; its false
+alarms on the no-fault cases and its detection per charge loss are scored too.
 
 Every finished case is appended to ``<out>/checkpoints/validate-faults.jsonl`` (and every
 commissioning posterior kept beside it), so an interrupted run resumes where it stopped.
