@@ -74,6 +74,7 @@ def _record(args: argparse.Namespace) -> int:
         rounds=args.rounds,
         coils=args.coils,
         method=_record_method(args),
+        attempts=getattr(args, "attempts", 1),
     )
     text = (
         f"{result.format_table()}\n\n{result.n_simulations} simulations, "
@@ -421,6 +422,18 @@ def _add_record_method_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_attempts_option(parser: argparse.ArgumentParser) -> None:
+    from pymc_vcc.studies.unit_log import COMMISSIONING_ATTEMPTS
+
+    parser.add_argument(
+        "--attempts",
+        type=_positive(int),
+        default=COMMISSIONING_ATTEMPTS,
+        help="calibrations at most, each from a new seed while the predictive check fails; "
+        f"the best is kept (default {COMMISSIONING_ATTEMPTS})",
+    )
+
+
 def _add_record_options(parser: argparse.ArgumentParser) -> None:
     """Options of the commands that read a unit's own log."""
     from pymc_vcc.studies.record_budget import COILS
@@ -685,6 +698,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_study_options(calibrate, "results/calibrate", "small")
     _add_record_options(calibrate)
     _add_record_method_option(calibrate)
+    _add_attempts_option(calibrate)
     calibrate.set_defaults(handler=_record, alarm_fraction=0.9)
 
     validate = commands.add_parser(

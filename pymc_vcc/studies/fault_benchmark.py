@@ -50,6 +50,7 @@ from pymc_vcc.studies.truths import (
 )
 from pymc_vcc.studies.unit_log import (
     ALARM_PROBABILITY,
+    COMMISSIONING_ATTEMPTS,
     RECORD_BUDGETS,
     calibrate_record,
     record_budget_name,
@@ -397,7 +398,9 @@ def commission(
 ) -> xr.DataTree:
     """The commissioning posterior of a unit's healthy record, calibrated as the benchmark does
     (:func:`~pymc_vcc.studies.unit_log.calibrate_record` at ``budget``'s particles and
-    model-error draws, :data:`~pymc_vcc.studies.unit_log.RECORD_BUDGETS`; ``seed`` seeds it)."""
+    model-error draws, :data:`~pymc_vcc.studies.unit_log.RECORD_BUDGETS`, calibrated again
+    while its predictive check fails, :data:`~pymc_vcc.studies.unit_log.COMMISSIONING_ATTEMPTS`
+    times at most; ``seed`` seeds it)."""
     draws, error_draws = RECORD_BUDGETS[budget]
     return calibrate_record(
         healthy.observed,
@@ -408,6 +411,7 @@ def commission(
         seed=seed,
         solver=solver,
         coils=coils,
+        attempts=COMMISSIONING_ATTEMPTS,
     )
 
 

@@ -26,6 +26,7 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pymc as pm
@@ -118,6 +119,11 @@ EXACT_STARTS = (0.1, 0.9)
 stage besides the mean: from the mean alone, model (13) found a mode 0.10 kg off."""
 SIMULATIONS_PER_PARTICLE = 52  # a calibration's default simulation cap per SMC particle
 PPC_KEYS = ("z_mean", "p_value", "misfit")  # the check per output, ppc_<key> in sample_stats
+COMMISSIONING_ATTEMPTS = 3
+"""Calibrations of a commissioning record at most, each from a new seed while the predictive
+check fails (:func:`calibrate_record`'s ``attempts``): at the ``small`` budget the SMC sometimes
+settles where the model misses a sensor (a benchmark unit read 1.65 kg for 1.41, its check
+failing on TS and TE; from the next seed 1.50 kg, every sensor reproduced)."""
 
 
 def record_budget_name(settings) -> str:
@@ -149,6 +155,53 @@ def box_prior(unit: Unit, parameters: Sequence[str]) -> UniformPrior:
 
 
 def calibrate_record(
+    observed: xr.Dataset,
+    inputs: xr.Dataset,
+    executor: Executor,
+    *,
+    attempts: int = 1,
+    seed: int = 0,
+    **options: Any,
+) -> xr.DataTree:
+    """The posterior of a unit's record (:func:`calibrate_once`), calibrated again from seed
+    ``seed + k`` while its predictive check fails, ``attempts`` times at most: the attempt
+    whose check fails on the fewest outputs (then with the largest smallest p-value) is kept;
+    ``check_attempts`` in its ``sample_stats`` says how many ran, ``n_simulations`` counts
+    them all, and only the kept attempt's warnings are shown.
+
+    Args:
+        observed, inputs, executor, seed, options: as for :func:`calibrate_once`.
+        attempts: calibrations at most (1: one, whatever its check says;
+            :data:`COMMISSIONING_ATTEMPTS` for a commissioning).
+    """
+    if attempts < 1:
+        raise ValueError(f"attempts must be at least 1, got {attempts}")
+    tried: list[tuple[xr.DataTree, list[warnings.WarningMessage]]] = []
+    for k in range(attempts):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            tree = calibrate_once(observed, inputs, executor, seed=seed + k, **options)
+        tried.append((tree, caught))
+        if not any(check["misfit"] for check in predictive_checks(tree).values()):
+            break
+    kept, caught = min(tried, key=lambda attempt: _check_rank(attempt[0]))
+    for message in caught:
+        warnings.warn(message.message, message.category, stacklevel=2)
+    stats = kept["sample_stats"].to_dataset()
+    stats["check_attempts"] = len(tried)
+    stats["n_simulations"] = sum(int(tree["sample_stats"]["n_simulations"]) for tree, _ in tried)
+    kept["sample_stats"] = xr.DataTree(stats)
+    return kept
+
+
+def _check_rank(tree: xr.DataTree) -> tuple[float, float]:
+    """Orders calibrations by their predictive check: fewest misfits, then the largest
+    smallest p-value."""
+    checks = predictive_checks(tree).values()
+    return sum(c["misfit"] for c in checks), -min(c["p_value"] for c in checks)
+
+
+def calibrate_once(
     observed: xr.Dataset,
     inputs: xr.Dataset,
     executor: Executor,
@@ -715,6 +768,7 @@ def record_study(
     rounds: int = 1,
     coils: str = "finer",
     method: str = "likelihood",
+    attempts: int = 1,
 ) -> RecordResult:
     """Calibrate a unit's log (``pymc-vcc calibrate``), or identify its charge against a
     commissioning result (``pymc-vcc leak LOG --prior``): load and check the log before any
@@ -732,7 +786,7 @@ def record_study(
             :func:`leak_alarm`).
         drift: sd of each parameter's change since commissioning, a fraction of its range.
         alarm_fraction: the alarm's threshold, a fraction of the commissioned charge.
-        rounds, coils, method: as for :func:`calibrate_record`.
+        rounds, coils, method, attempts: as for :func:`calibrate_record`.
     """
     from pymc_vcc.io.measurements import load_log
     from pymc_vcc.plots import plot_charge_posteriors, save_figure
@@ -766,6 +820,7 @@ def record_study(
                 rounds=rounds,
                 coils=coils,
                 method=method,
+                attempts=attempts,
             )
         stats = tree["sample_stats"]
         checks = predictive_checks(tree)

@@ -1,8 +1,13 @@
 """A record's calibration: whose coils made it, and the sampler under its error budget."""
 
+import warnings
+
+import numpy as np
 import pytest
+import xarray as xr
 
 from pymc_vcc.execution.executors import make_executor
+from pymc_vcc.studies import unit_log
 from pymc_vcc.studies.truths import generate_truth
 from pymc_vcc.studies.unit_log import REJECTION_MAIN, REJECTION_PILOT, calibrate_record
 
@@ -64,3 +69,73 @@ def test_a_later_record_takes_a_prior_or_a_commissioning_posterior_not_both():
     prior = box_prior(load_unit(), ["M0"])
     with pytest.raises(ValueError, match="a prior or a commissioning posterior, not both"):
         calibrate_record(None, None, None, prior=prior, commissioning=xr.DataTree())  # type: ignore[arg-type]
+
+
+def _checked(seed: int, misfits: list[bool], p_values: list[float]) -> xr.DataTree:
+    """A calibration's tree as far as its attempts are judged: the check per output."""
+    outputs = ["TS", "TE"][: len(misfits)]
+    stats = xr.Dataset(
+        {
+            "ppc_z_mean": ("output", np.zeros(len(outputs))),
+            "ppc_p_value": ("output", p_values),
+            "ppc_misfit": ("output", np.array(misfits, dtype=float)),
+            "n_simulations": 100 + seed,
+        },
+        coords={"output": outputs},
+    )
+    return xr.DataTree.from_dict({"posterior": xr.Dataset({"seed": seed}), "sample_stats": stats})
+
+
+def _attempts_of(monkeypatch, checks):
+    """Make each calibration of seed k return ``checks[k]`` (misfits, p-values), warning when
+    a sensor is missed; return the seeds calibrated."""
+    seeds = []
+
+    def calibrate_once(observed, inputs, executor, *, seed, **options):
+        seeds.append(seed)
+        misfits, p_values = checks[seed]
+        if any(misfits):
+            warnings.warn(f"seed {seed} misses a sensor", stacklevel=2)
+        return _checked(seed, misfits, p_values)
+
+    monkeypatch.setattr(unit_log, "calibrate_once", calibrate_once)
+    return seeds
+
+
+def test_a_failed_predictive_check_calibrates_again_from_the_next_seed(monkeypatch):
+    seeds = _attempts_of(
+        monkeypatch, {5: ([True, False], [0.001, 0.5]), 6: ([False, False], [0.2, 0.4])}
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        tree = calibrate_record(None, None, None, attempts=3, seed=5)
+    assert seeds == [5, 6]  # stops at the first that reproduces every sensor
+    assert int(tree["posterior"]["seed"]) == 6
+    assert int(tree["sample_stats"]["check_attempts"]) == 2
+    assert int(tree["sample_stats"]["n_simulations"]) == 105 + 106
+    assert not [w for w in caught if "misses a sensor" in str(w.message)]
+
+
+def test_when_every_attempt_fails_the_best_check_is_kept_with_its_warning(monkeypatch):
+    seeds = _attempts_of(
+        monkeypatch,
+        {
+            0: ([True, True], [0.001, 0.002]),
+            1: ([True, False], [0.003, 0.5]),
+            2: ([True, False], [0.004, 0.5]),
+        },
+    )
+    with pytest.warns(UserWarning, match="seed 2 misses a sensor") as caught:
+        tree = calibrate_record(None, None, None, attempts=3)
+    assert seeds == [0, 1, 2]
+    assert int(tree["posterior"]["seed"]) == 2  # one misfit, and the larger smallest p-value
+    assert len([w for w in caught if "misses a sensor" in str(w.message)]) == 1
+
+
+def test_one_attempt_keeps_a_failed_check_and_none_is_refused(monkeypatch):
+    seeds = _attempts_of(monkeypatch, {0: ([True], [0.001])})
+    with pytest.warns(UserWarning, match="misses a sensor"):
+        tree = calibrate_record(None, None, None)
+    assert seeds == [0] and int(tree["sample_stats"]["check_attempts"]) == 1
+    with pytest.raises(ValueError, match="attempts must be at least 1, got 0"):
+        calibrate_record(None, None, None, attempts=0)
