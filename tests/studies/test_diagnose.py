@@ -326,8 +326,8 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     # the row keeps the model's own reading too, from which the form error is measured
     assert gas["model_form"] == MODEL_FORM and gas["model_sd"] > 0
     assert gas["score"] in ("correct diagnosis", "misdiagnosis", "missed detection", "no response")
-    kept = sorted((tmp_path / "faults" / "checkpoints").glob("validate-faults-unit-*.nc"))
-    assert [path.stem.endswith("-recentred") for path in kept] == [False, True]
+    kept = (tmp_path / "faults" / "checkpoints").glob("validate-faults-unit-*.nc")
+    assert sorted(path.stem.endswith("-recentred") for path in kept) == [False, True]
     again = fault_benchmark(
         StudySettings(budget="smoke", out=tmp_path / "faults", n_workers=2, resume=True),
         "model",
