@@ -265,69 +265,6 @@ def separating_sensor(
     return outputs[int(np.argmax(gap))]
 
 
-RECENTRED = "recentred_simulations"
-"""A re-centred commissioning's attribute (:func:`recentre`): the simulations it took."""
-
-
-def recentre(
-    commissioning: xr.DataTree,
-    executor: Executor,
-    *,
-    unit: Unit | None = None,
-    drift: float = 0.03,
-    budget: str = "small",
-    seed: int = 0,
-    solver: str | Solver = "cvode",
-    coils: str = "finer",
-    accuracy: SensorAccuracy | None = None,
-    fault_probability: float = FAULT_PROBABILITY,
-) -> xr.DataTree:
-    """The commissioning as a later record's calibration reads the healthy unit: its own
-    record calibrated again under the later prior and error budget
-    (:func:`~pymc_vcc.studies.unit_log.calibrate_record` with ``commissioning``), whose
-    posterior takes the commissioning posterior's place (its predictive check and coil offset
-    stay). The later budget is narrower than a first record's (the sensors' biases shared, the
-    model's error compensated), and a commissioning posterior drawn under the wider one can miss
-    there: on a benchmark unit its best draw fit a new record of the unchanged unit 34 nats
-    worse than under the first budget, and a liquid-line restriction took up the slack in
-    every later record. Unchanged when already re-centred (:data:`RECENTRED`) or without its
-    record.
-
-    Args:
-        commissioning: the commissioning posterior, its record in it (as
-            :func:`~pymc_vcc.studies.unit_log.calibrate_record` writes it).
-        executor, unit, drift, budget, seed, solver, coils, accuracy, fault_probability: as for
-            :func:`diagnose`.
-    """
-    if commissioning.attrs.get(RECENTRED) or not {"observed_data", "constant_data"} <= set(
-        commissioning
-    ):
-        return commissioning
-    draws, error_draws = RECORD_BUDGETS[budget]
-    with warnings.catch_warnings():  # its own check is the commissioning's, reported apart
-        warnings.simplefilter("ignore")
-        tree = calibrate_record(
-            commissioning["observed_data"].to_dataset(),
-            commissioning["constant_data"].to_dataset(),
-            executor,
-            unit=unit,
-            commissioning=commissioning,
-            drift=drift,
-            fault_probability=fault_probability,
-            draws=draws,
-            error_draws=error_draws,
-            seed=seed,
-            solver=solver,
-            coils=coils,
-            accuracy=accuracy,
-        )
-    names = list(commissioning["posterior"].data_vars)
-    recentred = commissioning.copy()
-    recentred["posterior"] = xr.DataTree(tree["posterior"].to_dataset()[names])
-    recentred.attrs[RECENTRED] = int(tree["sample_stats"]["n_simulations"])
-    return recentred
-
-
 def diagnose(
     observed: xr.Dataset,
     inputs: xr.Dataset,
@@ -346,9 +283,7 @@ def diagnose(
     fault_probability: float = FAULT_PROBABILITY,
     model_form: float = MODEL_FORM,
 ) -> Diagnosis:
-    """Diagnose a later record of a unit against its commissioning posterior, read again
-    under the later record's error budget first (:func:`recentre`: one calibration more, unless
-    the commissioning given is already re-centred).
+    """Diagnose a later record of a unit against its commissioning posterior.
 
     Args:
         observed: the later record's outputs (SI, ``units`` attrs) on a regular grid from 0 s.
@@ -383,24 +318,11 @@ def diagnose(
     unreproduced = commissioning_misfits(commissioning)
     if unreproduced:
         warnings.warn(_misfit_caution(unreproduced), stacklevel=2)
-    draws, error_draws = RECORD_BUDGETS[budget]
-    given = commissioning
-    commissioning = recentre(
-        commissioning,
-        executor,
-        unit=unit,
-        drift=drift,
-        budget=budget,
-        seed=seed,
-        solver=solver,
-        coils=coils,
-        accuracy=accuracy,
-        fault_probability=fault_probability,
-    )
     posterior = commissioning["posterior"]
     commissioned = {
         str(n): float(posterior[n].mean()) for n in posterior.data_vars if n in unit.parameters.ids
     }
+    draws, error_draws = RECORD_BUDGETS[budget]
     tree = calibrate_record(
         observed,
         inputs,
@@ -418,10 +340,6 @@ def diagnose(
         method=method,
         accuracy=accuracy,
     )
-    if commissioning is not given:  # re-centred here: its simulations are this diagnosis's
-        stats = tree["sample_stats"].to_dataset()
-        stats["n_simulations"] = int(stats["n_simulations"]) + commissioning.attrs[RECENTRED]
-        tree["sample_stats"] = xr.DataTree(stats)
     samples = {str(n): tree["posterior"][n].values.ravel() for n in tree["posterior"].data_vars}
     read = fault_intensities(samples, posterior, unit, seed)
     intensities = with_model_form(read, seed, model_form)
@@ -541,7 +459,6 @@ __all__ = [
     "commissioning_misfits",
     "diagnose",
     "diagnose_study",
-    "recentre",
     "separating_sensor",
     "verdict",
 ]

@@ -39,7 +39,7 @@ import xarray as xr
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
-from pymc_vcc.studies.diagnose import diagnose, recentre
+from pymc_vcc.studies.diagnose import diagnose
 from pymc_vcc.studies.faults import FAULTS
 from pymc_vcc.studies.truths import (
     VARIANTS,
@@ -416,30 +416,17 @@ def commission(
 
 
 def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.DataTree:
-    """:func:`commission` of a unit, re-centred for its later records
-    (:func:`~pymc_vcc.studies.diagnose.recentre`), each kept beside the checkpoint."""
+    """:func:`commission` of a unit, kept beside the checkpoint."""
     from pymc_vcc.studies.common import write_netcdf
 
     unit = f"unit-{seed}-{healthy.variant}-{healthy.charge:.4f}kg-{budget}"
+    kept = None if log is None else log.with_name(f"{log.stem}-{unit}.nc")
+    if kept is not None and kept.is_file():
+        return xr.open_datatree(kept, engine="h5netcdf")
     solver = settings.solver or "cvode"
-    steps = (
-        ("", lambda _: commission(healthy, executor, budget, settings.seed, solver, coils)),
-        (
-            "-recentred",
-            lambda tree: recentre(
-                tree, executor, budget=budget, seed=settings.seed, solver=solver, coils=coils
-            ),
-        ),
-    )
-    tree = None
-    for suffix, make in steps:
-        kept = None if log is None else log.with_name(f"{log.stem}-{unit}{suffix}.nc")
-        if kept is not None and kept.is_file():
-            tree = xr.open_datatree(kept, engine="h5netcdf")
-            continue
-        tree = make(tree)
-        if kept is not None:
-            write_netcdf(tree, kept)
+    tree = commission(healthy, executor, budget, settings.seed, solver, coils)
+    if kept is not None:
+        write_netcdf(tree, kept)
     return tree
 
 

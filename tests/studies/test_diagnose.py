@@ -92,47 +92,6 @@ def _posterior(draws):
     return xr.DataTree.from_dict({"posterior": dataset})
 
 
-def test_a_commissioning_is_read_again_under_the_later_budget_once(monkeypatch):
-    """recentre calibrates the commissioning's own record against the commissioning (the later
-    prior and budget) and puts that posterior in its place, the check kept; a tree already
-    re-centred, or one without its record, is returned as it is."""
-    import xarray as xr
-
-    from pymc_vcc.studies import diagnose as diagnosis_module
-    from pymc_vcc.studies.diagnose import RECENTRED, recentre
-
-    record = xr.Dataset({"TD": ("time", [300.0, 301.0])}, coords={"time": [0.0, 1.0]})
-    inputs = xr.Dataset({"T_ambient": ("time", [308.0, 308.0])}, coords={"time": [0.0, 1.0]})
-    tree = _posterior({"M0": [1.5] * 4, "CF_VOL": [1.3] * 4})
-    tree["observed_data"] = xr.DataTree(record)
-    tree["constant_data"] = xr.DataTree(inputs)
-    tree["sample_stats"] = xr.DataTree(xr.Dataset({"ppc_misfit": ("output", [0.0])}))
-    calls = []
-
-    def calibrate_record(observed, logged, executor, *, commissioning, **options):
-        calls.append((observed, logged, commissioning))
-        read = _posterior({"M0": [1.4] * 4, "CF_VOL": [1.1] * 4, "DP_RESTR": [1e3] * 4})
-        read["sample_stats"] = xr.DataTree(xr.Dataset({"n_simulations": 321}))
-        return read
-
-    monkeypatch.setattr(diagnosis_module, "calibrate_record", calibrate_record)
-    recentred = recentre(tree, executor=None)  # type: ignore[arg-type]
-    [(observed, logged, against)] = calls
-    assert observed.identical(record) and logged.identical(inputs) and against is tree
-    posterior = recentred["posterior"]
-    assert sorted(posterior.data_vars) == ["CF_VOL", "M0"]  # the commissioning's parameters
-    assert (
-        float(posterior["CF_VOL"].mean()) == 1.1
-        and float(tree["posterior"]["CF_VOL"].mean()) == 1.3
-    )
-    assert "ppc_misfit" in recentred["sample_stats"]  # the commissioning's own check stays
-    assert recentred.attrs[RECENTRED] == 321
-    assert recentre(recentred, executor=None) is recentred  # type: ignore[arg-type]
-    bare = _posterior({"M0": [1.5] * 4})
-    assert recentre(bare, executor=None) is bare  # type: ignore[arg-type]
-    assert len(calls) == 1
-
-
 def test_a_commissioning_posterior_without_the_moved_parameters_is_refused_in_one_line():
     from pymc_vcc.physics.unit import load_unit
     from pymc_vcc.studies.unit_log import later_prior
@@ -326,8 +285,8 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     # the row keeps the model's own reading too, from which the form error is measured
     assert gas["model_form"] == MODEL_FORM and gas["model_sd"] > 0
     assert gas["score"] in ("correct diagnosis", "misdiagnosis", "missed detection", "no response")
-    kept = (tmp_path / "faults" / "checkpoints").glob("validate-faults-unit-*.nc")
-    assert sorted(path.stem.endswith("-recentred") for path in kept) == [False, True]
+    kept = list((tmp_path / "faults" / "checkpoints").glob("validate-faults-unit-*.nc"))
+    assert len(kept) == 1
     again = fault_benchmark(
         StudySettings(budget="smoke", out=tmp_path / "faults", n_workers=2, resume=True),
         "model",
