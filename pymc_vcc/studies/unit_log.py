@@ -123,7 +123,7 @@ COMMISSIONING_ATTEMPTS = 3
 """Calibrations of a commissioning record at most, each from a new seed while the predictive
 check fails (:func:`calibrate_record`'s ``attempts``): at the ``small`` budget the SMC sometimes
 settles where the model misses a sensor (a benchmark unit read 1.65 kg for 1.41, its check
-failing on TS and TE; from the next seed 1.50 kg, every sensor reproduced)."""
+failing on TS and TE; from the next seed 1.40 kg, every sensor reproduced)."""
 
 
 def record_budget_name(settings) -> str:
