@@ -131,3 +131,13 @@ def test_the_demo_reaches_the_leak_study_without_a_log(monkeypatch):
     args = build_parser().parse_args(["demo", "--out", "x"])
     with pytest.raises(Reached):
         cli._leak(args)
+
+
+def test_a_commissioning_is_calibrated_again_up_to_its_attempts(capsys):
+    from pymc_vcc.studies.unit_log import COMMISSIONING_ATTEMPTS
+
+    assert build_parser().parse_args(["calibrate", "log.csv"]).attempts == COMMISSIONING_ATTEMPTS
+    assert build_parser().parse_args(["calibrate", "log.csv", "--attempts", "1"]).attempts == 1
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["calibrate", "log.csv", "--attempts", "0"])
+    assert "--attempts: must be a positive integer, got '0'" in capsys.readouterr().err
