@@ -52,6 +52,7 @@ from pymc_vcc.physics.simulate import OUTPUT_INTERVAL, VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.faults import (
     ERROR_FAULT_PROBABILITY,
+    REFERENCE_FAULT_PROBABILITY,
     FAULT_PROBABILITY,
     FAULTS,
     HEALTHY_FAULT_FRACTION,
@@ -290,12 +291,15 @@ def calibrate_once(
         (``n_simulations``).
     """
     unit = load_unit() if unit is None else unit
-    error_prior = None
+    error_prior, reference = None, None
     if commissioning is not None:
         if prior is not None:
             raise ValueError("a later record takes a prior or a commissioning posterior, not both")
         prior = later_prior(commissioning, unit, drift, seed, fault_probability)
         error_prior = later_prior(commissioning, unit, drift, seed, ERROR_FAULT_PROBABILITY)
+        reference = GaussianReference.of_mixture(
+            later_prior(commissioning, unit, drift, seed, REFERENCE_FAULT_PROBABILITY)
+        )
     prior = box_prior(unit, parameters) if prior is None else prior
     if rounds < 1:
         raise ValueError(f"rounds must be at least 1, got {rounds}")
@@ -365,7 +369,7 @@ def calibrate_once(
             executor,
             seed,
             progressbar,
-            None if error_prior is None else GaussianReference.of_mixture(error_prior),
+            reference,
         )
         simulations += n_sampled
         thetas = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
