@@ -52,10 +52,10 @@ from pymc_vcc.physics.simulate import OUTPUT_INTERVAL, VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.faults import (
     ERROR_FAULT_PROBABILITY,
-    REFERENCE_FAULT_PROBABILITY,
     FAULT_PROBABILITY,
     FAULTS,
     HEALTHY_FAULT_FRACTION,
+    REFERENCE_FAULT_PROBABILITY,
     check_fault_probability,
     fault_intensities,
     moved_parameters,
@@ -235,18 +235,20 @@ def calibrate_once(
         commissioning: for a later record of a commissioned unit, instead of ``prior``: the
             commissioning posterior, whose :func:`later_prior` (with ``drift`` and
             ``fault_probability``) is the prior. The model's error is then first drawn where
-            each fault is as likely as not
-            (:data:`~pymc_vcc.studies.faults.ERROR_FAULT_PROBABILITY`): drawn at the unit as
-            commissioned, it missed how the model errs at a 20 % overcharge (+9 % read). With
-            the commissioning record in the tree (``observed_data``, ``constant_data``, as
-            this function writes it), each error draw's model runs where the commissioning
-            calibration would have left it for that draw's unit, the sensors' biases shared by
-            both records (:func:`~pymc_vcc.studies.record_budget.compensate`; twice the
-            error draws' simulations): a unit's differences from the model, absorbed into its
-            parameters at commissioning, stop being absorbed at another charge, and read as
-            a smaller leak without it (some units' 20 % loss read as 10-12 %). The SMC
+            each fault has :data:`~pymc_vcc.studies.faults.ERROR_FAULT_PROBABILITY` (mostly
+            the unit as commissioned: drawn where each fault was as likely as not, the
+            faulted draws set the budget's correlations and a healthy unit's record read a
+            liquid-line restriction). With the commissioning record in the tree
+            (``observed_data``, ``constant_data``, as this function writes it), each error
+            draw's model runs where the commissioning calibration would have left it for
+            that draw's unit, the sensors' biases shared by both records
+            (:func:`~pymc_vcc.studies.record_budget.compensate`; twice the error draws'
+            simulations): a unit's differences from the model, absorbed into its parameters
+            at commissioning, stop being absorbed at another charge, and read as a smaller
+            leak without it (some units' 20 % loss read as 10-12 %). The SMC
             tempers from the prior with each fault as likely as not
-            (:meth:`~pymc_vcc.inference.pymc.reference.GaussianReference.of_mixture`), so
+            (:data:`~pymc_vcc.studies.faults.REFERENCE_FAULT_PROBABILITY`,
+            :meth:`~pymc_vcc.inference.pymc.reference.GaussianReference.of_mixture`), so
             that its first particles reach every fault's range: from the prior itself, mostly
             the healthy unit, a 20 % loss near the box's low end (0.98 kg) was missed for a
             liquid-line restriction, on the model's own data too.

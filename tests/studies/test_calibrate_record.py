@@ -139,3 +139,47 @@ def test_one_attempt_keeps_a_failed_check_and_none_is_refused(monkeypatch):
     assert seeds == [0] and int(tree["sample_stats"]["check_attempts"]) == 1
     with pytest.raises(ValueError, match="attempts must be at least 1, got 0"):
         calibrate_record(None, None, None, attempts=0)
+
+
+def test_a_later_records_model_error_is_drawn_mostly_at_the_unit_as_commissioned(
+    truth, monkeypatch
+):
+    """The model-error draws of a later record hold each fault with about
+    ERROR_FAULT_PROBABILITY (a healthy unit's error shapes the budget), not with the SMC
+    reference's REFERENCE_FAULT_PROBABILITY."""
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.faults import (
+        ERROR_FAULT_PROBABILITY,
+        FAULTS,
+        REFERENCE_FAULT_PROBABILITY,
+    )
+
+    class Drawn(Exception):
+        pass
+
+    def capture(model, observed, prior, executor, rng, *, thetas, **options):
+        raise Drawn(dict(zip(prior.names, thetas.T, strict=True)))
+
+    monkeypatch.setattr(unit_log, "error_budget", capture)
+    unit = load_unit()
+    rng = np.random.default_rng(0)
+    posterior = xr.Dataset(
+        {
+            spec.id: (("chain", "draw"), spec.nominal * (1 + 0.01 * rng.standard_normal((1, 64))))
+            for spec in unit.parameters
+        }
+    )
+    commissioning = xr.DataTree.from_dict({"posterior": posterior})
+    with pytest.raises(Drawn) as drawn, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the commissioning holds no record: said apart
+        calibrate_record(
+            truth.observed, truth.inputs, None, commissioning=commissioning, coils="model",
+            error_draws=2000,
+        )  # fmt: skip
+    draws = drawn.value.args[0]
+    for fault in FAULTS:
+        if fault.relative:  # the calibration parameters' faults: read against commissioning
+            continue
+        beyond = float(np.mean(draws[fault.parameters[0]] >= fault.threshold))
+        assert beyond < 2 * ERROR_FAULT_PROBABILITY < REFERENCE_FAULT_PROBABILITY, fault.name
+        assert beyond > ERROR_FAULT_PROBABILITY / 4, fault.name  # the faults are still drawn
