@@ -103,6 +103,7 @@ def _diagnose(args: argparse.Namespace) -> int:
         method=args.method,
         fault_probability=args.fault_probability,
         model_form=args.model_form,
+        named=args.named,
     )
     n_simulations = int(result.tree["sample_stats"]["n_simulations"])
     return _report(
@@ -667,6 +668,7 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="the folder (or posterior.nc) written by `pymc-vcc calibrate` at commissioning",
     )
+    from pymc_vcc.studies.diagnose import NAMED, POSSIBLE
     from pymc_vcc.studies.faults import FAULT_PROBABILITY, MODEL_FORM
 
     diagnose.add_argument(
@@ -683,6 +685,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="relative sd of the model's reading of a fault's intensity on a unit that is not "
         f"the model, >= 0 (default {MODEL_FORM}: measured on the fault benchmark; 0: the "
         "model's reading alone)",
+    )
+    diagnose.add_argument(
+        "--named",
+        type=float,
+        default=NAMED,
+        metavar="P",
+        help=f"the probability beyond its threshold that names a fault, in [{POSSIBLE}, 1) "
+        f"(default {NAMED}; lower names more faults near their thresholds, for more false "
+        "alarms)",
     )
     _add_study_options(diagnose, "results/diagnose", "small")
     _add_record_options(diagnose)

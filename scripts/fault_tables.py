@@ -3,8 +3,9 @@
 ``pymc-vcc validate --faults all --out DIR`` appends one JSON row per case to
 ``DIR/checkpoints/validate-faults.jsonl``; the measured rows behind the docs are kept in
 ``docs/results/runs/``. Run ``.venv/bin/python scripts/fault_tables.py ROWS.jsonl``: the score
-(:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), the scores of each case, and the
-cases not diagnosed correctly or whose interval misses.
+(:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), the scores of each case, the
+cases not diagnosed correctly or whose interval misses, and what the verdicts would have scored
+at other naming probabilities (:func:`~pymc_vcc.studies.fault_benchmark.rescored`).
 """
 
 from __future__ import annotations
@@ -14,11 +15,13 @@ import statistics
 import sys
 from pathlib import Path
 
-from pymc_vcc.studies.fault_benchmark import CASES, case_label, summarise_cases
+from pymc_vcc.studies.diagnose import NAMED
+from pymc_vcc.studies.fault_benchmark import CASES, case_label, rescored, summarise_cases
 from pymc_vcc.studies.faults import FAULTS
 
 CATEGORIES = ("false alarm", "misdiagnosis", "missed detection", "no response")
 SHOWN_PROBABILITY = 0.1  # the probabilities a failed case lists
+NAMING_PROBABILITIES = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)  # the trade-off table's rows
 
 
 def _case_name(label: str) -> str:
@@ -111,9 +114,32 @@ def _failures(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _trade_off(rows: list[dict]) -> str:
+    lines = [
+        "| naming probability | false alarms | correct diagnosis | misdiagnosis | missed "
+        "detection | no response |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for named in NAMING_PROBABILITIES:
+        t = summarise_cases(rescored(rows, named))
+        rates = (
+            t[key]
+            for key in (
+                "false_alarm_rate",
+                "correct_rate",
+                "misdiagnosis_rate",
+                "missed_rate",
+                "no_response_rate",
+            )
+        )
+        mark = f"**{named}** (default)" if named == NAMED else f"{named}"
+        lines.append(f"| {mark} | " + " | ".join(f"{100 * r:.0f} %" for r in rates) + " |")
+    return "\n".join(lines)
+
+
 def main(path: str) -> None:
     rows = [json.loads(line) for line in Path(path).read_text().splitlines()]
-    print(_summary(rows), _by_case(rows), _failures(rows), sep="\n\n")
+    print(_summary(rows), _by_case(rows), _failures(rows), _trade_off(rows), sep="\n\n")
 
 
 if __name__ == "__main__":

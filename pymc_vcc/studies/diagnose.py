@@ -54,8 +54,17 @@ from pymc_vcc.studies.unit_log import (
     predictive_checks,
 )
 
-NAMED = 0.9  # a fault is named when P(intensity beyond its threshold) is at least this
-POSSIBLE = 0.5  # below NAMED and at least this: reported as possible
+NAMED = 0.9
+"""The naming probability: a fault is named when P(intensity beyond its threshold) is at
+least this (``pymc-vcc diagnose --named``)."""
+POSSIBLE = 0.5
+"""Below the naming probability and at least this, a fault is reported as possible."""
+
+
+def check_named(named: float) -> None:
+    """Refuse a naming probability outside [:data:`POSSIBLE`, 1), in one line."""
+    if not POSSIBLE <= named < 1.0:
+        raise ValueError(f"naming probability must lie in [{POSSIBLE}, 1), got {named}")
 
 
 @dataclass
@@ -79,6 +88,7 @@ class Diagnosis:
         model_intensities: fault name -> the intensity draws as the model reads them, before
             its form error.
         model_form: the form error's relative sd in :attr:`intensities`.
+        named: the probability that named a fault in :attr:`verdict`.
     """
 
     tree: xr.DataTree
@@ -90,6 +100,7 @@ class Diagnosis:
     unreproduced: list[str] = field(default_factory=list)
     model_intensities: dict[str, np.ndarray] = field(default_factory=dict)
     model_form: float = 0.0
+    named: float = NAMED
 
     def summary(self) -> dict:
         """The JSON summary: per fault its intensity (mean, 95 % interval) and probability."""
@@ -113,6 +124,7 @@ class Diagnosis:
             "charge_change_kg": float(charge.mean() - self.commissioned[CHARGE]),
             "commissioning_unreproduced": self.unreproduced,
             "model_form": self.model_form,
+            "named_at": self.named,
         }
 
     def plot(self) -> Figure:
@@ -133,7 +145,7 @@ class Diagnosis:
         charge = self.tree["posterior"][CHARGE].values.ravel() - self.commissioned[CHARGE]
         low, high = np.quantile(charge, [0.025, 0.975])
         lines = [
-            f"verdict: {self.verdict}",
+            f"verdict: {self.verdict} (a fault is named at P(fault) >= {self.named:g})",
             f"charge change since commissioning: {charge.mean():+.3f} kg "
             f"(95 % interval {low:+.3f} to {high:+.3f} kg)",
             "",
@@ -178,24 +190,29 @@ def _misfit_caution(outputs: Sequence[str]) -> str:
     )
 
 
-def verdict(probabilities: Mapping[str, float]) -> tuple[str, list[tuple[str, str]]]:
+def verdict(
+    probabilities: Mapping[str, float], named: float = NAMED
+) -> tuple[str, list[tuple[str, str]]]:
     """The verdict from each fault's probability, and the pairs it could not separate: two
-    faults neither of which reaches :data:`NAMED` but whose probabilities together do.
+    faults neither of which reaches ``named`` but whose probabilities together do.
 
     Args:
         probabilities: fault name -> P(intensity beyond its threshold).
+        named: the probability that names a fault (:data:`NAMED`; lower names more faults
+            near their thresholds for more false alarms and misdiagnoses).
     """
-    named = [name for name, p in probabilities.items() if p >= NAMED]
-    if len(named) > 1:
-        return "several: " + ", ".join(named), []
-    if len(named) == 1:
-        return named[0], []
+    check_named(named)
+    sure = [name for name, p in probabilities.items() if p >= named]
+    if len(sure) > 1:
+        return "several: " + ", ".join(sure), []
+    if len(sure) == 1:
+        return sure[0], []
     pairs = [
         (a, b)
         for a, b in itertools.combinations(probabilities, 2)
-        if probabilities[a] >= 1 - NAMED
-        and probabilities[b] >= 1 - NAMED
-        and probabilities[a] + probabilities[b] >= NAMED
+        if probabilities[a] >= 1 - named
+        and probabilities[b] >= 1 - named
+        and probabilities[a] + probabilities[b] >= named
     ]
     if pairs:
         a, b = max(pairs, key=lambda pair: probabilities[pair[0]] + probabilities[pair[1]])
@@ -282,6 +299,7 @@ def diagnose(
     accuracy: SensorAccuracy | None = None,
     fault_probability: float = FAULT_PROBABILITY,
     model_form: float = MODEL_FORM,
+    named: float = NAMED,
 ) -> Diagnosis:
     """Diagnose a later record of a unit against its commissioning posterior.
 
@@ -303,9 +321,11 @@ def diagnose(
             (:func:`~pymc_vcc.studies.unit_log.later_prior`).
         model_form: the relative sd of the model's reading of an intensity
             (:data:`~pymc_vcc.studies.faults.MODEL_FORM`; 0: the model's reading alone).
+        named: the probability that names a fault (:func:`verdict`).
     """
     check_fault_probability(fault_probability)
     check_model_form(model_form)
+    check_named(named)
     unit = load_unit() if unit is None else unit
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
@@ -344,7 +364,7 @@ def diagnose(
     read = fault_intensities(samples, posterior, unit, seed)
     intensities = with_model_form(read, seed, model_form)
     probabilities = {f.name: float(np.mean(intensities[f.name] >= f.threshold)) for f in FAULTS}
-    text, pairs = verdict(probabilities)
+    text, pairs = verdict(probabilities, named)
     by_name = {f.name: f for f in FAULTS}
     point = {name: float(values.mean()) for name, values in samples.items()}
     point[CHARGE] = point.get(MODEL_CHARGE, point[CHARGE])
@@ -379,6 +399,7 @@ def diagnose(
         unreproduced,
         model_intensities=read,
         model_form=model_form,
+        named=named,
     )
 
 
@@ -395,6 +416,7 @@ def diagnose_study(
     method: str = "likelihood",
     fault_probability: float = FAULT_PROBABILITY,
     model_form: float = MODEL_FORM,
+    named: float = NAMED,
 ) -> Diagnosis:
     """``pymc-vcc diagnose LOG --prior COMMISSIONING``: load and check the log and the
     commissioning posterior before any simulation, diagnose, and write the posterior, the
@@ -406,7 +428,7 @@ def diagnose_study(
         commissioning: the folder (or ``posterior.nc``) of the healthy unit's calibration.
         column_map: the log's column map (default: ``LOG.columns.toml`` beside it).
         unit: the unit description (default: the built-in split unit).
-        drift, coils, rounds, method, fault_probability, model_form: as for
+        drift, coils, rounds, method, fault_probability, model_form, named: as for
             :func:`diagnose`.
     """
     from pymc_vcc.io.measurements import load_log
@@ -423,6 +445,7 @@ def diagnose_study(
     check_drift(drift)
     check_fault_probability(fault_probability)
     check_model_form(model_form)
+    check_named(named)
     budget = record_budget_name(settings)
     unit = unit or load_unit()
     measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
@@ -443,6 +466,7 @@ def diagnose_study(
             method=method,
             fault_probability=fault_probability,
             model_form=model_form,
+            named=named,
         )
         if settings.out is not None:
             write_netcdf(result.tree, settings.out / POSTERIOR_FILE)
@@ -454,8 +478,11 @@ def diagnose_study(
 
 __all__ = [
     "FAULTS",
+    "NAMED",
+    "POSSIBLE",
     "Diagnosis",
     "Fault",
+    "check_named",
     "commissioning_misfits",
     "diagnose",
     "diagnose_study",

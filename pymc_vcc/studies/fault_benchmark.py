@@ -39,7 +39,7 @@ import xarray as xr
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
-from pymc_vcc.studies.diagnose import diagnose
+from pymc_vcc.studies.diagnose import diagnose, verdict
 from pymc_vcc.studies.faults import FAULTS
 from pymc_vcc.studies.truths import (
     VARIANTS,
@@ -156,6 +156,22 @@ def score(fault: str | None, verdict: str) -> str:
     if named == [fault]:
         return "correct diagnosis"
     return "misdiagnosis" if named else "no response"
+
+
+def rescored(rows: Sequence[dict], named: float) -> list[dict]:
+    """The cases' rows with the verdict and score each would have had at another naming
+    probability (:func:`~pymc_vcc.studies.diagnose.verdict`): a benchmark's trade-off between
+    false alarms and faults named, read without diagnosing again.
+
+    Args:
+        rows: the cases' rows as :func:`fault_benchmark` keeps them.
+        named: the naming probability.
+    """
+    again = []
+    for row in rows:
+        text, _ = verdict(row["probabilities"], named)
+        again.append(row | {"verdict": text, "score": score(row["fault"], text)})
+    return again
 
 
 def _case_row(fault_name: str | None, intensity: float, diagnosis) -> dict:
@@ -438,6 +454,7 @@ __all__ = [
     "commission",
     "fault_benchmark",
     "model_form_needed",
+    "rescored",
     "score",
     "summarise_cases",
 ]

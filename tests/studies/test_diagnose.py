@@ -175,6 +175,27 @@ def test_verdict_names_one_several_none_or_the_pair_it_cannot_separate():
     assert pairs == [] and text == "no fault named; possible: a"
 
 
+def test_a_lower_naming_probability_names_a_fault_nearer_its_threshold():
+    """At 0.7 a fault at 0.75 is named and a pair at 0.4 and 0.35 is not distinguishable; at
+    the default both are less sure ("possible", "no fault")."""
+    quiet = dict.fromkeys(("a", "b", "c"), 0.01)
+    assert verdict(quiet | {"a": 0.75}, named=0.7) == ("a", [])
+    assert verdict(quiet | {"a": 0.75}) == ("no fault named; possible: a", [])
+    assert verdict(quiet | {"a": 0.4, "b": 0.35}, named=0.7)[1] == [("a", "b")]
+    assert verdict(quiet | {"a": 0.4, "b": 0.35}) == ("no fault", [])
+
+
+def test_a_naming_probability_outside_its_range_is_refused_through_the_cli(tmp_path, capsys):
+    from pymc_vcc.cli import main
+
+    for named in ("0.4", "1"):
+        code = main(["diagnose", "no-such.csv", "--prior", "none", "--named", named,
+                     "--out", str(tmp_path / "d")])  # fmt: skip
+        err = capsys.readouterr().err.strip()
+        assert code != 0 and f"naming probability must lie in [0.5, 1), got {float(named)}" in err
+        assert len(err.splitlines()) == 1 and not (tmp_path / "d").exists()
+
+
 def test_a_commissioning_the_model_missed_is_named_in_the_report():
     """The outputs whose predictive check failed at commissioning are read from its tree and
     stated under the report (none for a tree written without a check)."""
@@ -227,6 +248,25 @@ def test_cases_are_scored_in_yuill_and_brauns_categories():
     assert score(gas, f"{gas} / {fouling}: not distinguishable with these sensors") == (
         "no response"
     )
+
+
+def test_rows_are_scored_again_at_another_naming_probability():
+    """A gas at 0.8 and a healthy record reading gas at 0.6: at 0.9 a possible gas (no
+    response) and no alarm; at 0.75 the gas named; at 0.5 a false alarm as well."""
+    from pymc_vcc.studies.fault_benchmark import rescored
+
+    gas = "non-condensable gas"
+    rows = [
+        {"fault": gas, "probabilities": {gas: 0.8}, "verdict": "", "score": ""},
+        {"fault": None, "probabilities": {gas: 0.6}, "verdict": "", "score": ""},
+    ]
+    scores = {p: [r["score"] for r in rescored(rows, p)] for p in (0.9, 0.75, 0.5)}
+    assert scores == {
+        0.9: ["no response", "correct"],
+        0.75: ["correct diagnosis", "correct"],
+        0.5: ["correct diagnosis", "false alarm"],
+    }
+    assert rows[0]["score"] == ""  # the rows themselves are left as they were
 
 
 def test_score_table_counts_rates_among_healthy_and_faulted_cases():
