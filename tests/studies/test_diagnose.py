@@ -177,12 +177,12 @@ def test_verdict_names_one_several_none_or_the_pair_it_cannot_separate():
 
 def test_a_lower_naming_probability_names_a_fault_nearer_its_threshold():
     """At 0.7 a fault at 0.75 is named and a pair at 0.4 and 0.35 is not distinguishable; at
-    the default both are less sure ("possible", "no fault")."""
+    0.9 both are less sure ("possible", "no fault")."""
     quiet = dict.fromkeys(("a", "b", "c"), 0.01)
     assert verdict(quiet | {"a": 0.75}, named=0.7) == ("a", [])
-    assert verdict(quiet | {"a": 0.75}) == ("no fault named; possible: a", [])
+    assert verdict(quiet | {"a": 0.75}, named=0.9) == ("no fault named; possible: a", [])
     assert verdict(quiet | {"a": 0.4, "b": 0.35}, named=0.7)[1] == [("a", "b")]
-    assert verdict(quiet | {"a": 0.4, "b": 0.35}) == ("no fault", [])
+    assert verdict(quiet | {"a": 0.4, "b": 0.35}, named=0.9) == ("no fault", [])
 
 
 def test_a_naming_probability_outside_its_range_is_refused_through_the_cli(tmp_path, capsys):
