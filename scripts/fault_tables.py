@@ -22,6 +22,13 @@ from pymc_vcc.studies.faults import FAULTS
 CATEGORIES = ("false alarm", "misdiagnosis", "missed detection", "no response")
 SHOWN_PROBABILITY = 0.1  # the probabilities a failed case lists
 NAMING_PROBABILITIES = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)  # the trade-off table's rows
+TRADE_OFF_RATES = (  # the trade-off table's columns, keys of the score table
+    "false_alarm_rate",
+    "correct_rate",
+    "misdiagnosis_rate",
+    "missed_rate",
+    "no_response_rate",
+)
 
 
 def _case_name(label: str) -> str:
@@ -122,16 +129,7 @@ def _trade_off(rows: list[dict]) -> str:
     ]
     for named in NAMING_PROBABILITIES:
         t = summarise_cases(rescored(rows, named))
-        rates = (
-            t[key]
-            for key in (
-                "false_alarm_rate",
-                "correct_rate",
-                "misdiagnosis_rate",
-                "missed_rate",
-                "no_response_rate",
-            )
-        )
+        rates = (t[key] for key in TRADE_OFF_RATES)
         mark = f"**{named}** (default)" if named == NAMED else f"{named}"
         lines.append(f"| {mark} | " + " | ".join(f"{100 * r:.0f} %" for r in rates) + " |")
     return "\n".join(lines)
