@@ -400,14 +400,13 @@ def _add_shared_sampler_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_rounds_option(parser: argparse.ArgumentParser) -> None:
+def _add_rounds_option(parser: argparse.ArgumentParser, default: int = 1) -> None:
     parser.add_argument(
         "--rounds",
         type=_positive(int),
-        default=1,
+        default=default,
         help="calibrations in turn, each after the first with the model error drawn at the "
-        "previous posterior (local); 2 removed a 0.1 kg pull on a benchmark unit at about "
-        "twice the simulations (default 1)",
+        "previous posterior (local), within the same cap on simulations (default %(default)s)",
     )
 
 
@@ -435,11 +434,12 @@ def _add_attempts_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_record_options(parser: argparse.ArgumentParser) -> None:
-    """Options of the commands that read a unit's own log."""
+def _add_record_options(parser: argparse.ArgumentParser, rounds: int = 1) -> None:
+    """Options of the commands that read a unit's own log (``rounds``: the default of
+    ``--rounds``)."""
     from pymc_vcc.studies.record_budget import COILS
 
-    _add_rounds_option(parser)
+    _add_rounds_option(parser, rounds)
     parser.add_argument(
         "--coils",
         choices=list(COILS),
@@ -668,7 +668,7 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="the folder (or posterior.nc) written by `pymc-vcc calibrate` at commissioning",
     )
-    from pymc_vcc.studies.diagnose import NAMED, POSSIBLE
+    from pymc_vcc.studies.diagnose import NAMED, POSSIBLE, ROUNDS
     from pymc_vcc.studies.faults import FAULT_PROBABILITY, MODEL_FORM
 
     diagnose.add_argument(
@@ -696,7 +696,7 @@ def build_parser() -> argparse.ArgumentParser:
         "alarms)",
     )
     _add_study_options(diagnose, "results/diagnose", "small")
-    _add_record_options(diagnose)
+    _add_record_options(diagnose, rounds=ROUNDS)
     _add_record_method_option(diagnose)
     diagnose.set_defaults(handler=_diagnose)
 

@@ -9,6 +9,7 @@ import xarray as xr
 
 from pymc_vcc.cli import main
 from pymc_vcc.io.measurements import column_map_beside, example_log_path, load_log
+from pymc_vcc.studies.diagnose import ROUNDS
 
 
 @pytest.mark.slow
@@ -54,8 +55,10 @@ def test_calibrate_then_leak_on_the_shipped_example_log(tmp_path, capsys):
         assert (diagnosed / name).is_file(), name
     faults = json.loads((diagnosed / "summary.json").read_text())["faults"]
     assert len(faults) == 7 and all(0.0 <= f["probability"] <= 1.0 for f in faults.values())
-    posterior = xr.open_datatree(diagnosed / "posterior.nc", engine="h5netcdf")["posterior"]
-    assert {"DP_RESTR", "P_NCG", "M0", "FO_FLOW"} <= set(posterior.data_vars)
+    diagnosis = xr.open_datatree(diagnosed / "posterior.nc", engine="h5netcdf")
+    assert {"DP_RESTR", "P_NCG", "M0", "FO_FLOW"} <= set(diagnosis["posterior"].data_vars)
+    # the model's error drawn again at the first round's posterior (the faulted unit)
+    assert int(diagnosis["sample_stats"]["error_rounds"]) == ROUNDS == 2
 
 
 def test_a_bad_log_is_refused_in_one_line_before_any_simulation(tmp_path, capsys):
