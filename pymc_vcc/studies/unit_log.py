@@ -326,6 +326,7 @@ def calibrate_once(
     thetas, simulations, offset, commissioned = None, 0, None, None
     if error_prior is not None:
         thetas = error_prior.sample(error_draws, rng)
+    error_thetas = thetas
     if commissioning is not None:
         commissioned = _commissioning_record(commissioning, model)
     if CHARGE in prior.names and coils == "finer":
@@ -350,7 +351,7 @@ def calibrate_once(
             rng,
             accuracy=accuracy,
             n_draws=n_error,
-            thetas=None if thetas is None else thetas[rng.choice(len(thetas), n_error)],
+            thetas=_error_thetas(error_thetas, thetas, n_error, rng),
             offset=offset,
             coils=coils,
             commissioning=commissioned,
@@ -414,6 +415,23 @@ def calibrate_once(
             stacklevel=2,
         )
     return tree
+
+
+def _error_thetas(
+    first: np.ndarray | None, previous: np.ndarray | None, n_draws: int, rng: np.random.Generator
+) -> np.ndarray | None:
+    """Where a round's model error is drawn: ``n_draws`` of the ``previous`` round's posterior
+    draws, half of them instead of the ``first`` round's draws when both are given (a later
+    record's second round: its error both at the unit as commissioned and where the first
+    round's posterior put it)."""
+    if previous is None:
+        return None
+    if first is None or first is previous:
+        return previous[rng.choice(len(previous), n_draws)]
+    half = n_draws // 2
+    return np.vstack(
+        [first[rng.choice(len(first), half)], previous[rng.choice(len(previous), n_draws - half)]]
+    )
 
 
 def _error_runs(n_draws: int, coils: str, commissioned: Commissioning | None) -> int:
