@@ -406,7 +406,8 @@ def _add_rounds_option(parser: argparse.ArgumentParser, default: int = 1) -> Non
         type=_positive(int),
         default=default,
         help="calibrations in turn, each after the first with the model error drawn at the "
-        "previous posterior (local), within the same cap on simulations (default %(default)s)",
+        "previous posterior (with --prior: half of it, half as the first round's), within the "
+        "same cap on simulations (default %(default)s)",
     )
 
 

@@ -60,10 +60,11 @@ least this (``pymc-vcc diagnose --named``)."""
 POSSIBLE = 0.5
 """Below the naming probability and at least this, a fault is reported as possible."""
 ROUNDS = 2
-"""Calibrations of a later record in turn (``pymc-vcc diagnose --rounds``): the second with the
-model's error drawn at the first's posterior, the faulted unit, rather than mostly at the unit
-as commissioned, where a large fault's own model error was read as a second fault (a 30 %
-undercharge with a liquid-line restriction)."""
+"""Calibrations of a later record in turn (``pymc-vcc diagnose --rounds``): the second with
+half of the model's error drawn at the first's posterior, the faulted unit, and half, as the
+first's, mostly at the unit as commissioned. Drawn at the commissioned unit alone, a large
+fault's own model error was read as a second fault (a 30 % undercharge with a liquid-line
+restriction); drawn at the posterior alone, a healthy unit's record read a fault."""
 
 
 def check_named(named: float) -> None:

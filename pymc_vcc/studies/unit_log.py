@@ -266,8 +266,9 @@ def calibrate_once(
         solver: ODE solver, a method name or a
             :class:`~pymc_vcc.physics.integration.solver.Solver`.
         rounds: calibrations in turn, each after the first with the model error drawn at the
-            previous posterior's draws (local rather than over the whole prior); the rounds
-            before the last scout with :data:`SCOUTING_SHARE` of the particles and draws.
+            previous posterior's draws (local rather than over the whole prior; for a later
+            record half of them, half where the first round drew it); the rounds before the
+            last scout with :data:`SCOUTING_SHARE` of the particles and draws.
         progressbar: show PyMC's progress bar.
         coils: whose coils made the record
             (:data:`~pymc_vcc.studies.record_budget.COILS`): ``finer`` for a physical unit

@@ -183,3 +183,17 @@ def test_a_later_records_model_error_is_drawn_mostly_at_the_unit_as_commissioned
         beyond = float(np.mean(draws[fault.parameters[0]] >= fault.threshold))
         assert beyond < 2 * ERROR_FAULT_PROBABILITY < REFERENCE_FAULT_PROBABILITY, fault.name
         assert beyond > ERROR_FAULT_PROBABILITY / 4, fault.name  # the faults are still drawn
+
+
+def test_a_later_round_draws_half_its_model_error_where_the_first_round_did():
+    """A later record's second round draws its model error half at the first round's draws
+    (the unit as commissioned, mostly) and half at the first round's posterior; a first
+    record's rounds, and a first round, draw at one set alone."""
+    rng = np.random.default_rng(0)
+    first, posterior = np.zeros((40, 3)), np.ones((30, 3))
+    mixed = unit_log._error_thetas(first, posterior, 11, rng)
+    assert mixed.shape == (11, 3)
+    assert (mixed[:, 0] == 0).sum() == 5 and (mixed[:, 0] == 1).sum() == 6
+    assert (unit_log._error_thetas(first, first, 11, rng) == 0).all()
+    assert (unit_log._error_thetas(None, posterior, 11, rng) == 1).all()
+    assert unit_log._error_thetas(first, None, 11, rng) is None
