@@ -45,7 +45,7 @@ from pymc_vcc.inference.priors import GMMPrior, Prior, UniformPrior
 from pymc_vcc.inference.pymc.laplace import fit_reference, laplace_draws
 from pymc_vcc.inference.pymc.likelihood import add_likelihood
 from pymc_vcc.inference.pymc.reference import GaussianReference
-from pymc_vcc.inference.pymc.smc import sample_smc_abc
+from pymc_vcc.inference.pymc.smc import PosteriorQualityWarning, sample_smc_abc
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import OUTPUT_INTERVAL, VCCSimulator
@@ -268,7 +268,10 @@ def calibrate_once(
         rounds: calibrations in turn, each after the first with the model error drawn at the
             previous posterior's draws (local rather than over the whole prior; for a later
             record half of them, half where the first round drew it); the rounds before the
-            last scout with :data:`SCOUTING_SHARE` of the particles and draws.
+            last scout with :data:`SCOUTING_SHARE` of the particles and draws, their
+            posterior's quality not reported
+            (:class:`~pymc_vcc.inference.pymc.smc.PosteriorQualityWarning`: the small
+            budget's 48 scouting particles hold an ESS of 24 by design).
         progressbar: show PyMC's progress bar.
         coils: whose coils made the record
             (:data:`~pymc_vcc.studies.record_budget.COILS`): ``finer`` for a physical unit
@@ -362,19 +365,22 @@ def calibrate_once(
         to_come = PREDICTIVE_DRAWS + exact_reserve
         to_come += round_left * _error_runs(error_draws, coils, commissioned)
         affordable = share * (max_simulations - simulations - to_come)
-        tree, n_sampled = _sample(
-            method,
-            model,
-            observed,
-            budget,
-            prior,
-            particles,
-            max(1, int(affordable)),
-            executor,
-            seed,
-            progressbar,
-            reference,
-        )
+        with warnings.catch_warnings():
+            if round_left:  # a scout's posterior only places the next round's model error
+                warnings.simplefilter("ignore", PosteriorQualityWarning)
+            tree, n_sampled = _sample(
+                method,
+                model,
+                observed,
+                budget,
+                prior,
+                particles,
+                max(1, int(affordable)),
+                executor,
+                seed,
+                progressbar,
+                reference,
+            )
         simulations += n_sampled
         thetas = np.column_stack([tree["posterior"][n].values.ravel() for n in prior.names])
     checked, n_exact = budget, 0

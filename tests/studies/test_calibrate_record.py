@@ -197,3 +197,38 @@ def test_a_later_round_draws_half_its_model_error_where_the_first_round_did():
     assert (unit_log._error_thetas(first, first, 11, rng) == 0).all()
     assert (unit_log._error_thetas(None, posterior, 11, rng) == 1).all()
     assert unit_log._error_thetas(first, None, 11, rng) is None
+
+
+def test_only_the_last_rounds_posterior_quality_is_reported(truth, monkeypatch):
+    """A scouting round's posterior only places the next round's model error: its posterior
+    quality warnings are not shown (its 48 particles at the small budget hold an ESS of 24 by
+    design), the last round's are, and other warnings of either round too."""
+    from types import SimpleNamespace
+
+    from pymc_vcc.inference.pymc.smc import PosteriorQualityWarning
+    from pymc_vcc.physics.unit import load_unit
+
+    def budget(model, observed, prior, executor, rng, **options):
+        return SimpleNamespace(n_draws=12, n_failed=0, outputs=list(observed.data_vars))
+
+    def sample(method, model, observed, budget, prior, particles, *rest):
+        warnings.warn(f"{particles} particles: few", PosteriorQualityWarning, stacklevel=2)
+        warnings.warn(f"{particles} particles: other", UserWarning, stacklevel=2)
+        posterior = xr.Dataset({"M0": (("chain", "draw"), np.full((1, particles), 1.4))})
+        return xr.DataTree.from_dict({"posterior": posterior, "sample_stats": xr.Dataset()}), 0
+
+    def check(tree, model, budget, executor, rng):
+        return {name: dict.fromkeys(unit_log.PPC_KEYS, 0.0) for name in budget.outputs}, 0
+
+    monkeypatch.setattr(unit_log, "error_budget", budget)
+    monkeypatch.setattr(unit_log, "_sample", sample)
+    monkeypatch.setattr(unit_log, "_predictive_check", check)
+    prior = unit_log.box_prior(load_unit(), ["M0"])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        calibrate_record(
+            truth.observed, truth.inputs, None, prior=prior, draws=96, rounds=2,
+            coils="model", method="rejection",
+        )  # fmt: skip
+    shown = {str(w.message) for w in caught}
+    assert shown == {"48 particles: other", "96 particles: few", "96 particles: other"}

@@ -659,6 +659,11 @@ MAX_DISTANCE_RATIO = 3.0
 """Median final distance over ε above which the ABC kernel is too narrow for the simulator."""
 
 
+class PosteriorQualityWarning(RuntimeWarning):
+    """An SMC posterior that rests on too few distinct particles, or whose final distances sit
+    far above ε (filter this category to silence a run whose posterior is only a scout)."""
+
+
 def _per_chain(values: np.ndarray) -> list[np.ndarray]:
     """A ``(chain, stage)`` statistic of the standard layout as one array of stages per chain
     (the padding after a chain's last stage dropped)."""
@@ -686,7 +691,7 @@ def _with_run_summary(tree: DataTree, model: Model) -> DataTree:
         warnings.warn(
             f"an SMC stage's effective sample size fell to {ess.min():.0f} (< {MIN_ESS}): the "
             "posterior rests on too few distinct particles; raise draws",
-            RuntimeWarning,
+            PosteriorQualityWarning,
             stacklevel=3,
         )
     if nodes and all(isinstance(rv.owner.op._distance, DistanceKernel) for rv in nodes):
@@ -697,10 +702,17 @@ def _with_run_summary(tree: DataTree, model: Model) -> DataTree:
                 f"the final particles' distances sit about {ratio:.1f} ε above ε = {epsilon}: "
                 "the simulations cannot come as close to the data as ε asks (noisy data "
                 "compared with noise-free simulations?); add sensor_noise or raise epsilon",
-                RuntimeWarning,
+                PosteriorQualityWarning,
                 stacklevel=3,
             )
     return tree
 
 
-__all__ = ["KERNELS", "ParallelIMH", "ParallelKernel", "ParallelMH", "sample_smc_abc"]
+__all__ = [
+    "KERNELS",
+    "ParallelIMH",
+    "ParallelKernel",
+    "ParallelMH",
+    "PosteriorQualityWarning",
+    "sample_smc_abc",
+]
