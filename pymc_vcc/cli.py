@@ -203,9 +203,16 @@ def _validate(args: argparse.Namespace) -> int:
     if args.faults:
         if args.truth:
             raise ValueError("--faults names its own variant; give it without --truth")
+        from pymc_vcc.studies.diagnose import ROUNDS
         from pymc_vcc.studies.fault_benchmark import fault_benchmark
 
-        scored = fault_benchmark(_settings(args), args.faults, args.datasets)
+        scored = fault_benchmark(
+            _settings(args),
+            args.faults,
+            args.datasets,
+            rounds=ROUNDS if args.rounds is None else args.rounds,
+            method=args.method,
+        )
         text = f"{scored.format_table()}\n\n{scored.wall_seconds:.0f} s"
         return _report(args, text, scored.summary())
     if args.truth:
@@ -216,7 +223,7 @@ def _validate(args: argparse.Namespace) -> int:
             args.truth,
             args.datasets,
             alarm=args.alarm,
-            rounds=args.rounds,
+            rounds=1 if args.rounds is None else args.rounds,
             method=args.method,
         )
         text = f"{benchmark.format_table()}\n\n{benchmark.wall_seconds:.0f} s"
@@ -400,14 +407,18 @@ def _add_shared_sampler_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_rounds_option(parser: argparse.ArgumentParser, default: int = 1) -> None:
+def _add_rounds_option(parser: argparse.ArgumentParser, default: int | None = 1) -> None:
+    """``--rounds`` (None: the study's own default, 1, or the diagnosis's with ``--faults``)."""
+    from pymc_vcc.studies.diagnose import ROUNDS
+
+    said = default if default is not None else f"1; with --faults, {ROUNDS} as diagnose"
     parser.add_argument(
         "--rounds",
         type=_positive(int),
         default=default,
         help="calibrations in turn, each after the first with the model error drawn at the "
         "previous posterior (with --prior: half of it, half as the first round's), within the "
-        "same cap on simulations (default %(default)s)",
+        f"same cap on simulations (default {said})",
     )
 
 
@@ -525,7 +536,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         help="the fault benchmark instead: --datasets units of this truth variant, each "
         "commissioned, then diagnosed with no fault and with each standard fault",
     )
-    _add_rounds_option(parser)
+    _add_rounds_option(parser, None)
     _add_record_method_option(parser)
     parser.add_argument(
         "--alarm",

@@ -141,3 +141,39 @@ def test_a_commissioning_is_calibrated_again_up_to_its_attempts(capsys):
     with pytest.raises(SystemExit):
         build_parser().parse_args(["calibrate", "log.csv", "--attempts", "0"])
     assert "--attempts: must be a positive integer, got '0'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("options", "rounds", "method"),
+    [([], None, "likelihood"), (["--rounds", "1", "--method", "rejection"], 1, "rejection")],
+)
+def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
+    monkeypatch, options, rounds, method
+):
+    """``validate --faults`` diagnoses as ``diagnose`` does unless told otherwise: its rounds
+    (:data:`ROUNDS`, not the real-units benchmark's one) and sampler reach every diagnosis."""
+    import pymc_vcc.cli as cli
+    from pymc_vcc.studies import fault_benchmark as benchmark
+    from pymc_vcc.studies.diagnose import ROUNDS
+
+    class Reached(Exception):
+        pass
+
+    def fault_benchmark(settings, variant, n_units, **options):
+        raise Reached(options)
+
+    monkeypatch.setattr(benchmark, "fault_benchmark", fault_benchmark)
+    args = build_parser().parse_args(["validate", "--faults", "all", *options])
+    with pytest.raises(Reached) as reached:
+        cli._validate(args)
+    assert reached.value.args[0] == {"rounds": rounds or ROUNDS, "method": method}
+
+
+def test_a_fault_benchmark_refuses_bad_rounds_or_sampler_before_any_simulation():
+    from pymc_vcc.studies import StudySettings
+    from pymc_vcc.studies.fault_benchmark import fault_benchmark
+
+    with pytest.raises(ValueError, match="rounds must be at least 1, got 0"):
+        fault_benchmark(StudySettings(), "all", 1, rounds=0)
+    with pytest.raises(ValueError, match="method 'mcmc': allowed are"):
+        fault_benchmark(StudySettings(), "all", 1, method="mcmc")

@@ -39,7 +39,7 @@ import xarray as xr
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
-from pymc_vcc.studies.diagnose import diagnose, verdict
+from pymc_vcc.studies.diagnose import ROUNDS, diagnose, verdict
 from pymc_vcc.studies.faults import FAULTS
 from pymc_vcc.studies.truths import (
     VARIANTS,
@@ -53,6 +53,8 @@ from pymc_vcc.studies.unit_log import (
     COMMISSIONING_ATTEMPTS,
     RECORD_BUDGETS,
     calibrate_record,
+    check_method,
+    check_rounds,
     record_budget_name,
 )
 
@@ -323,6 +325,9 @@ def fault_benchmark(
     variant: str = "all",
     n_units: int = 12,
     cases: Sequence[Case] = CASES,
+    *,
+    rounds: int = ROUNDS,
+    method: str = "likelihood",
 ) -> FaultBenchmarkResult:
     """Run the benchmark (see the module docstring).
 
@@ -331,11 +336,16 @@ def fault_benchmark(
         variant: the truth variant of every unit (:data:`~pymc_vcc.studies.truths.VARIANTS`).
         n_units: units, each commissioned once and recorded in every case.
         cases: the later records of each unit (:data:`CASES`).
+        rounds, method: each diagnosis's (:func:`~pymc_vcc.studies.diagnose.diagnose`); a
+            resumed benchmark reuses only the rows of its rounds (a row written before rows
+            kept them counts as any).
     """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
     if n_units < 1:
         raise ValueError(f"n_units must be at least 1, got {n_units}")
+    check_rounds(rounds)
+    check_method(method)
     known = {f.name for f in FAULTS}
     unknown = [name for name, _ in cases if name is not None and name not in known]
     if unknown:
@@ -348,7 +358,8 @@ def fault_benchmark(
     if log is not None and log.is_file():
         for line in log.read_text().splitlines():
             row = json.loads(line)
-            done[(row["unit_seed"], row["case"], row["budget"])] = row
+            if row.get("rounds", rounds) == rounds and row.get("method", method) == method:
+                done[(row["unit_seed"], row["case"], row["budget"])] = row
     unit = load_unit()
     runs = []
     with settings.open_executor() as executor:
@@ -376,6 +387,8 @@ def fault_benchmark(
                     seed=settings.seed,
                     solver=settings.solver or "cvode",
                     coils=coils,
+                    rounds=rounds,
+                    method=method,
                 )
                 row = _case_row(case[0], intensity, diagnosis) | {
                     "case": key[1],
@@ -383,6 +396,8 @@ def fault_benchmark(
                     "variant": variant,
                     "truth_kg": healthy.charge,
                     "budget": budget,
+                    "rounds": rounds,
+                    "method": method,
                     "seconds": time.perf_counter() - case_started,
                 }
                 if log is not None:

@@ -143,6 +143,12 @@ def check_method(method: str) -> None:
         raise ValueError(f"method {method!r}: allowed are {list(METHODS)}")
 
 
+def check_rounds(rounds: int) -> None:
+    """Refuse fewer than one calibration round, in one line."""
+    if rounds < 1:
+        raise ValueError(f"rounds must be at least 1, got {rounds}")
+
+
 def check_drift(drift: float) -> None:
     """Refuse a drift outside [0, 1] (a fraction of each parameter's range), in one line."""
     if not 0.0 <= drift <= 1.0:
@@ -307,8 +313,7 @@ def calibrate_once(
             later_prior(commissioning, unit, drift, seed, REFERENCE_FAULT_PROBABILITY)
         )
     prior = box_prior(unit, parameters) if prior is None else prior
-    if rounds < 1:
-        raise ValueError(f"rounds must be at least 1, got {rounds}")
+    check_rounds(rounds)
     check_coils(coils)
     check_method(method)
     if max_simulations is None:

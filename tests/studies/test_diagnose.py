@@ -336,6 +336,36 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     assert again.runs == first.runs and again.wall_seconds < 30
 
 
+def test_a_resumed_fault_benchmark_reuses_only_the_rows_of_its_rounds(tmp_path, monkeypatch):
+    import json
+
+    from pymc_vcc.studies import StudySettings
+    from pymc_vcc.studies import fault_benchmark as benchmark
+
+    class Commissioning(Exception):
+        pass
+
+    def commissioned(*args):
+        raise Commissioning
+
+    monkeypatch.setattr(benchmark, "_commissioned", commissioned)
+    cases = [(None, {})]
+    rows = tmp_path / "checkpoints" / f"{benchmark.RUNS_CHECKPOINT}.jsonl"
+    rows.parent.mkdir()
+    row = {
+        "unit_seed": 0, "case": benchmark.case_label(cases[0]), "budget": "smoke",
+        "rounds": 1, "method": "likelihood", "fault": None, "true_intensity": 0.0,
+        "verdict": "no fault", "score": "correct", "simulations": 10, "seconds": 1.0,
+        "probabilities": {fault.name: 0.0 for fault in FAULTS},
+    }  # fmt: skip
+    rows.write_text(json.dumps(row) + "\n")
+    settings = StudySettings(budget="smoke", out=tmp_path, n_workers=1, resume=True)
+    kept = benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1)
+    assert [r["rounds"] for r in kept.runs] == [1]
+    with pytest.raises(Commissioning):  # two rounds: its row is not that of one
+        benchmark.fault_benchmark(settings, "all", 1, cases, rounds=2)
+
+
 def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
     from pymc_vcc.physics.unit import load_unit
     from pymc_vcc.studies.fault_benchmark import CASES, _faulted
