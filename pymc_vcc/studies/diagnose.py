@@ -7,10 +7,11 @@ their ranges (the cycle's fault parameters, ``unit.faults``: a liquid-line restr
 non-condensable gas, leaking compressor valves, added near 0). Each fault of
 :data:`~pymc_vcc.studies.faults.FAULTS` then has an *intensity* relative to commissioning per
 posterior draw (:func:`~pymc_vcc.studies.faults.fault_intensities`), spread by the model's form
-error (:func:`~pymc_vcc.studies.faults.with_model_form`). Its posterior probability
-of lying beyond the fault's threshold names it (:data:`NAMED`); two faults that together are
-likely but neither alone are reported as not distinguishable, with the sensor that would tell
-them apart (:func:`separating_sensor`).
+error (:func:`~pymc_vcc.studies.faults.with_model_form`). Its posterior probability of lying
+beyond the fault's threshold, the form error integrated out
+(:func:`~pymc_vcc.studies.faults.beyond_probability`), names it (:data:`NAMED`); two faults
+that together are likely but neither alone are reported as not distinguishable, with the
+sensor that would tell them apart (:func:`separating_sensor`).
 
 The faults are the standard set of the fault-detection literature (Yuill and Braun's
 evaluation of FDD protocols; ASHRAE RP-1043): undercharge, overcharge, condenser fouling or low
@@ -40,6 +41,7 @@ from pymc_vcc.studies.faults import (
     FAULTS,
     MODEL_FORM,
     Fault,
+    beyond_probability,
     check_fault_probability,
     check_model_form,
     fault_intensities,
@@ -370,7 +372,9 @@ def diagnose(
     samples = {str(n): tree["posterior"][n].values.ravel() for n in tree["posterior"].data_vars}
     read = fault_intensities(samples, posterior, unit, seed)
     intensities = with_model_form(read, seed, model_form)
-    probabilities = {f.name: float(np.mean(intensities[f.name] >= f.threshold)) for f in FAULTS}
+    probabilities = {
+        f.name: beyond_probability(read[f.name], f.threshold, model_form) for f in FAULTS
+    }
     text, pairs = verdict(probabilities, named)
     by_name = {f.name: f for f in FAULTS}
     point = {name: float(values.mean()) for name, values in samples.items()}

@@ -56,10 +56,10 @@ from pymc_vcc.studies.faults import (
     FAULTS,
     HEALTHY_FAULT_FRACTION,
     REFERENCE_FAULT_PROBABILITY,
+    beyond_probability,
     check_fault_probability,
     fault_intensities,
     moved_parameters,
-    with_model_form,
 )
 from pymc_vcc.studies.record_budget import (
     CHARGE,
@@ -774,13 +774,12 @@ def leak_alarm(
     """The leak alarm's probability: that the charge of a later record's posterior is below
     ``fraction`` of the commissioned one, each draw paired with a commissioning draw (the
     undercharge's intensity beyond 1 − ``fraction``,
-    :func:`~pymc_vcc.studies.faults.fault_intensities`; the model's form error included,
-    :func:`~pymc_vcc.studies.faults.with_model_form`)."""
+    :func:`~pymc_vcc.studies.faults.fault_intensities`; the model's form error integrated
+    out, :func:`~pymc_vcc.studies.faults.beyond_probability`)."""
     draws = {str(n): later["posterior"][n].values.ravel() for n in later["posterior"].data_vars}
     undercharge = next(fault for fault in FAULTS if fault.name == "undercharge")
     read = fault_intensities(draws, commissioning["posterior"], unit, seed, [undercharge])
-    loss = with_model_form(read, seed)
-    return float(np.mean(loss[undercharge.name] >= 1.0 - fraction))
+    return beyond_probability(read[undercharge.name], 1.0 - fraction)
 
 
 def load_commissioning(path: str | Path) -> xr.DataTree:

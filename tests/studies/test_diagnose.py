@@ -118,8 +118,8 @@ def test_the_leak_alarm_is_the_undercharge_beyond_its_fraction_paired_with_commi
     unit = load_unit()
     pinned = _posterior({"M0": [1.6] * 100})
     alarm = leak_alarm(_posterior({"M0": [1.6 * 0.85] * 4000}), pinned, unit, 0.9, 0)
-    assert alarm == pytest.approx(norm.cdf(0.05 / (0.15 * MODEL_FORM)), abs=0.005)
-    assert leak_alarm(_posterior({"M0": [1.6 * 0.95] * 400}), pinned, unit, 0.9, 0) == 0.0
+    assert alarm == pytest.approx(norm.cdf(0.05 / (0.15 * MODEL_FORM)), abs=1e-9)
+    assert leak_alarm(_posterior({"M0": [1.6 * 0.95] * 400}), pinned, unit, 0.9, 0) < 1e-9
     commissioned = np.linspace(1.3, 1.9, 101)
     alarm = leak_alarm(_posterior({"M0": [1.6] * 4000}), _posterior({"M0": commissioned}), unit,
                        0.9, 0)  # fmt: skip
@@ -143,6 +143,24 @@ def test_the_model_form_spreads_each_intensity_in_proportion_and_zero_leaves_it(
         with pytest.raises(ValueError, match="model form spread") as e:
             with_model_form(read, 0, bad)
         assert "\n" not in str(e.value)
+
+
+def test_a_faults_probability_integrates_the_form_error_out_as_its_draws_would():
+    """beyond_probability is the mean, over many form-error draws, of the share of spread
+    draws beyond the threshold (draws above, near and below it, at 0 and negative), without
+    their noise; spread 0 is the share of the model's own draws beyond it."""
+    from pymc_vcc.studies.faults import beyond_probability, with_model_form
+
+    rng = np.random.default_rng(1)
+    read = np.concatenate([rng.normal(0.24, 0.03, 60), np.zeros(20), [-0.1, 0.1, 0.5]])
+    exact = beyond_probability(read, 0.2, 0.15)
+    drawn = [np.mean(with_model_form({"a": read}, seed, 0.15)["a"] >= 0.2) for seed in range(4000)]
+    assert exact == pytest.approx(np.mean(drawn), abs=4 * np.std(drawn) / np.sqrt(len(drawn)))
+    assert 0.4 < exact < 0.8 and np.std(drawn) > 0.02  # near a threshold, the draws' noise
+    assert beyond_probability(read, 0.2, 0.0) == np.mean(read >= 0.2)
+    assert beyond_probability(np.zeros(5), 0.2) == 0.0
+    with pytest.raises(ValueError, match="model form spread"):
+        beyond_probability(read, 0.2, -0.1)
 
 
 def test_the_model_form_needed_is_the_conformal_quantile_of_each_cases_spread():
