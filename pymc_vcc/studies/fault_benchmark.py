@@ -40,7 +40,7 @@ from pymc_vcc.execution.executors import Executor
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import ROUNDS, diagnose, verdict
-from pymc_vcc.studies.faults import FAULTS
+from pymc_vcc.studies.faults import FAULTS, beyond_probability
 from pymc_vcc.studies.truths import (
     VARIANTS,
     Truth,
@@ -160,19 +160,34 @@ def score(fault: str | None, verdict: str) -> str:
     return "misdiagnosis" if named else "no response"
 
 
-def rescored(rows: Sequence[dict], named: float) -> list[dict]:
+def rescored(rows: Sequence[dict], named: float, model_form: float | None = None) -> list[dict]:
     """The cases' rows with the verdict and score each would have had at another naming
-    probability (:func:`~pymc_vcc.studies.diagnose.verdict`): a benchmark's trade-off between
-    false alarms and faults named, read without diagnosing again.
+    probability (:func:`~pymc_vcc.studies.diagnose.verdict`) and, given ``model_form``, at
+    another form error (the probabilities computed again from the rows' ``model_reads``,
+    :func:`~pymc_vcc.studies.faults.beyond_probability`): a benchmark's trade-offs, read without
+    diagnosing again.
 
     Args:
         rows: the cases' rows as :func:`fault_benchmark` keeps them.
         named: the naming probability.
+        model_form: the form error's relative sd (None: the rows' own probabilities).
     """
+    thresholds = {fault.name: fault.threshold for fault in FAULTS}
     again = []
     for row in rows:
-        text, _ = verdict(row["probabilities"], named)
-        again.append(row | {"verdict": text, "score": score(row["fault"], text)})
+        probabilities = row["probabilities"]
+        if model_form is not None:
+            if "model_reads" not in row:
+                raise ValueError("these rows keep no model_reads: score them at their form error")
+            probabilities = {
+                name: beyond_probability(np.array(reads), thresholds[name], model_form)
+                for name, reads in row["model_reads"].items()
+            }
+        text, _ = verdict(probabilities, named)
+        again.append(
+            row
+            | {"probabilities": probabilities, "verdict": text, "score": score(row["fault"], text)}
+        )
     return again
 
 
@@ -184,6 +199,10 @@ def _case_row(fault_name: str | None, intensity: float, diagnosis) -> dict:
         "score": score(fault_name, diagnosis.verdict),
         "probabilities": diagnosis.probabilities,
         "simulations": int(diagnosis.tree["sample_stats"]["n_simulations"]),
+        "model_reads": {  # every fault's reading, to score again at another form error
+            name: [float(f"{value:.4g}") for value in draws]
+            for name, draws in diagnosis.model_intensities.items()
+        },
     }
     if fault_name is not None:
         draws = diagnosis.intensities[fault_name]

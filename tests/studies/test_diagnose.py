@@ -287,6 +287,23 @@ def test_rows_are_scored_again_at_another_naming_probability():
     assert rows[0]["score"] == ""  # the rows themselves are left as they were
 
 
+def test_rows_are_scored_again_at_another_form_error_from_the_models_reads():
+    """A gas read 60-70 kPa by the model (threshold 50): at form error 0 every draw is beyond
+    it, named; at 0.6 its probability falls under 0.9, possible; rows without the reads are
+    refused in one line."""
+    from pymc_vcc.studies.fault_benchmark import rescored
+
+    gas = "non-condensable gas"
+    row = {"fault": gas, "probabilities": {gas: 0.0}, "model_reads": {gas: [60e3, 65e3, 70e3]}}
+    (sharp,) = rescored([row], 0.9, model_form=0.0)
+    assert sharp["probabilities"][gas] == 1.0 and sharp["score"] == "correct diagnosis"
+    (wide,) = rescored([row], 0.9, model_form=0.6)
+    assert 0.5 < wide["probabilities"][gas] < 0.9 and wide["score"] == "no response"
+    assert rescored([row], 0.9)[0]["probabilities"][gas] == 0.0  # the row's own
+    with pytest.raises(ValueError, match="keep no model_reads"):
+        rescored([{"fault": gas, "probabilities": {}}], 0.9, model_form=0.1)
+
+
 def test_score_table_counts_rates_among_healthy_and_faulted_cases():
     from pymc_vcc.studies.fault_benchmark import summarise_cases
 
@@ -342,6 +359,8 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     assert gas["intensity_low"] <= gas["intensity_mean"] <= gas["intensity_high"]
     # the row keeps the model's own reading too, from which the form error is measured
     assert gas["model_form"] == MODEL_FORM and gas["model_sd"] > 0
+    reads = gas["model_reads"]  # and every fault's reading, to score at another form error
+    assert set(reads) == {f.name for f in FAULTS} and len(reads[gas["fault"]]) > 1
     assert gas["score"] in ("correct diagnosis", "misdiagnosis", "missed detection", "no response")
     kept = list((tmp_path / "faults" / "checkpoints").glob("validate-faults-unit-*.nc"))
     assert len(kept) == 1
