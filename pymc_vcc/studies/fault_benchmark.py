@@ -356,8 +356,8 @@ def fault_benchmark(
         n_units: units, each commissioned once and recorded in every case.
         cases: the later records of each unit (:data:`CASES`).
         rounds, method: each diagnosis's (:func:`~pymc_vcc.studies.diagnose.diagnose`); a
-            resumed benchmark reuses only the rows of its rounds (a row written before rows
-            kept them counts as any).
+            resumed benchmark reuses only the rows of its rounds and method (a row written before
+            rows kept them counts as any).
     """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
