@@ -212,6 +212,7 @@ def _validate(args: argparse.Namespace) -> int:
             args.datasets,
             rounds=ROUNDS if args.rounds is None else args.rounds,
             method=args.method,
+            later_seconds=args.later_seconds,
         )
         text = f"{scored.format_table()}\n\n{scored.wall_seconds:.0f} s"
         return _report(args, text, scored.summary())
@@ -513,6 +514,7 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_validate_options(parser: argparse.ArgumentParser) -> None:
+    from pymc_vcc.studies.fault_benchmark import LATER_SECONDS
     from pymc_vcc.studies.validation import METHODS
 
     parser.add_argument("--reference", type=float, default=1.5, metavar="KG", help="true charge")
@@ -538,6 +540,13 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
     )
     _add_rounds_option(parser, None)
     _add_record_method_option(parser)
+    parser.add_argument(
+        "--later-seconds",
+        type=_positive(float),
+        default=LATER_SECONDS,
+        help=f"with --faults: length of each later record, s (default {LATER_SECONDS:.0f}; at "
+        "most the built-in profile's 2120)",
+    )
     parser.add_argument(
         "--alarm",
         action="store_true",

@@ -144,14 +144,18 @@ def test_a_commissioning_is_calibrated_again_up_to_its_attempts(capsys):
 
 
 @pytest.mark.parametrize(
-    ("options", "rounds", "method"),
-    [([], None, "likelihood"), (["--rounds", "1", "--method", "rejection"], 1, "rejection")],
+    ("options", "rounds", "method", "seconds"),
+    [
+        ([], None, "likelihood", None),
+        (["--rounds", "1", "--method", "rejection", "--later-seconds", "600"], 1, "rejection", 600),
+    ],
 )
 def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
-    monkeypatch, options, rounds, method
+    monkeypatch, options, rounds, method, seconds
 ):
     """``validate --faults`` diagnoses as ``diagnose`` does unless told otherwise: its rounds
-    (:data:`ROUNDS`, not the real-units benchmark's one) and sampler reach every diagnosis."""
+    (:data:`ROUNDS`, not the real-units benchmark's one) and sampler reach every diagnosis, and
+    its later records are as long as asked."""
     import pymc_vcc.cli as cli
     from pymc_vcc.studies import fault_benchmark as benchmark
     from pymc_vcc.studies.diagnose import ROUNDS
@@ -166,7 +170,12 @@ def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
     args = build_parser().parse_args(["validate", "--faults", "all", *options])
     with pytest.raises(Reached) as reached:
         cli._validate(args)
-    assert reached.value.args[0] == {"rounds": rounds or ROUNDS, "method": method}
+    later_seconds = seconds or benchmark.LATER_SECONDS
+    assert reached.value.args[0] == {
+        "rounds": rounds or ROUNDS,
+        "method": method,
+        "later_seconds": later_seconds,
+    }
 
 
 def test_a_fault_benchmark_refuses_bad_rounds_or_sampler_before_any_simulation():
@@ -177,3 +186,5 @@ def test_a_fault_benchmark_refuses_bad_rounds_or_sampler_before_any_simulation()
         fault_benchmark(StudySettings(), "all", 1, rounds=0)
     with pytest.raises(ValueError, match="method 'mcmc': allowed are"):
         fault_benchmark(StudySettings(), "all", 1, method="mcmc")
+    with pytest.raises(ValueError, match=r"later_seconds = 3000.0 s: .* \(0, 2120\] s"):
+        fault_benchmark(StudySettings(), "all", 1, later_seconds=3000.0)

@@ -37,6 +37,7 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.executors import Executor
+from pymc_vcc.physics.inputs import builtin_inputs
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import ROUNDS, diagnose, verdict
@@ -93,6 +94,9 @@ evaporator's."""
 UNIT_CHARGES = (1.3, 1.8)  # kg: a unit's commissioned charge is drawn between these
 """Commissioned charges leave room for a 30 % loss and a 20 % gain inside the unit's box
 (0.9-2.2 kg)."""
+LATER_SECONDS = 1060.0
+"""Length of each later record, s (the commissioning record's: the first 1060 s of the built-in
+profile)."""
 RUNS_CHECKPOINT = "validate-faults"
 
 
@@ -347,6 +351,7 @@ def fault_benchmark(
     *,
     rounds: int = ROUNDS,
     method: str = "likelihood",
+    later_seconds: float = LATER_SECONDS,
 ) -> FaultBenchmarkResult:
     """Run the benchmark (see the module docstring).
 
@@ -358,6 +363,8 @@ def fault_benchmark(
         rounds, method: each diagnosis's (:func:`~pymc_vcc.studies.diagnose.diagnose`); a
             resumed benchmark reuses only the rows of its rounds and method (a row written before
             rows kept them counts as any).
+        later_seconds: length of each later record, s (at most the built-in profile's); a
+            resumed benchmark reuses only the rows of that length (older rows are 1060 s).
     """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
@@ -365,6 +372,12 @@ def fault_benchmark(
         raise ValueError(f"n_units must be at least 1, got {n_units}")
     check_rounds(rounds)
     check_method(method)
+    profile_end = float(builtin_inputs()["time"].values[-1])
+    if not 0.0 < later_seconds <= profile_end:
+        raise ValueError(
+            f"later_seconds = {later_seconds} s: a later record lies in the built-in profile, "
+            f"(0, {profile_end:.0f}] s"
+        )
     known = {f.name for f in FAULTS}
     unknown = [name for name, _ in cases if name is not None and name not in known]
     if unknown:
@@ -377,7 +390,8 @@ def fault_benchmark(
     if log is not None and log.is_file():
         for line in log.read_text().splitlines():
             row = json.loads(line)
-            if row.get("rounds", rounds) == rounds and row.get("method", method) == method:
+            same = row.get("rounds", rounds) == rounds and row.get("method", method) == method
+            if same and row.get("later_seconds", 1060.0) == later_seconds:
                 done[(row["unit_seed"], row["case"], row["budget"])] = row
     unit = load_unit()
     runs = []
@@ -396,7 +410,7 @@ def fault_benchmark(
                 case_started = time.perf_counter()
                 worn = worn_parameters(unit, healthy.parameters, np.random.default_rng([seed, n]))
                 parameters, intensity = _faulted(unit, healthy.parameters, worn, case)
-                later = record_again(healthy, seed + n + 1, parameters)
+                later = record_again(healthy, seed + n + 1, parameters, later_seconds)
                 diagnosis = diagnose(
                     later.observed,
                     later.inputs,
@@ -417,6 +431,7 @@ def fault_benchmark(
                     "budget": budget,
                     "rounds": rounds,
                     "method": method,
+                    "later_seconds": later_seconds,
                     "seconds": time.perf_counter() - case_started,
                 }
                 if log is not None:

@@ -118,15 +118,17 @@ def worn_parameters(
     return worn
 
 
-def record_again(earlier: Truth, seed: int, parameters: Mapping[str, float]) -> Truth:
+def record_again(
+    earlier: Truth, seed: int, parameters: Mapping[str, float], t_end: float | None = None
+) -> Truth:
     """The unit of ``earlier`` recorded again with ``parameters`` (the charge among them), over
-    the built-in input profile for as long: its coils, sensors and logger as they were, its
-    noise new (drawn from ``seed``)."""
+    the built-in input profile for ``t_end`` s (None: as long as ``earlier``): its coils,
+    sensors and logger as they were, its noise new (drawn from ``seed``)."""
     return generate_truth(
         earlier.variant,
         seed,
         charge=parameters["M0"],
-        t_end=float(earlier.observed["time"].values[-1]),
+        t_end=float(earlier.observed["time"].values[-1]) if t_end is None else t_end,
         parameters=parameters,
         n_volumes=earlier.n_volumes,
         sensors=earlier,

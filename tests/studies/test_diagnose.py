@@ -373,7 +373,9 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     assert again.runs == first.runs and again.wall_seconds < 30
 
 
-def test_a_resumed_fault_benchmark_reuses_only_the_rows_of_its_rounds(tmp_path, monkeypatch):
+def test_a_resumed_fault_benchmark_reuses_only_the_rows_of_its_rounds_and_length(
+    tmp_path, monkeypatch
+):
     import json
 
     from pymc_vcc.studies import StudySettings
@@ -401,6 +403,10 @@ def test_a_resumed_fault_benchmark_reuses_only_the_rows_of_its_rounds(tmp_path, 
     assert [r["rounds"] for r in kept.runs] == [1]
     with pytest.raises(Commissioning):  # two rounds: its row is not that of one
         benchmark.fault_benchmark(settings, "all", 1, cases, rounds=2)
+    # a row written before rows kept their length is of the commissioning record's 1060 s
+    assert benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, later_seconds=1060.0)
+    with pytest.raises(Commissioning):
+        benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, later_seconds=2120.0)
 
 
 def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():

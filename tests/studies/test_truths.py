@@ -96,6 +96,9 @@ def test_a_later_record_keeps_the_units_sensors_and_logger():
     assert not np.array_equal(later.observed["TD"].values, first.observed["TD"].values)
     fresh = generate_truth("all", seed=9, charge=CHARGE, t_end=300.0, parameters=first.parameters)
     assert fresh.biases != first.biases
+    longer = record_again(first, 9, first.parameters, t_end=420.0)
+    assert longer.observed["time"].values[-1] == 420.0 and longer.biases == first.biases
+    assert longer.input_offsets == first.input_offsets
 
 
 def test_a_month_of_wear_moves_the_wearing_parameters_a_little_and_nothing_else():
