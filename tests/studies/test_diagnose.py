@@ -347,7 +347,7 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     """One unit, healthy and with non-condensable gas, at the smoke budget; run again, it
     recomputes nothing (the rows and the commissioning posterior are kept)."""
     from pymc_vcc.studies import StudySettings
-    from pymc_vcc.studies.fault_benchmark import fault_benchmark
+    from pymc_vcc.studies.fault_benchmark import LATER_SECONDS, fault_benchmark
     from pymc_vcc.studies.faults import MODEL_FORM
 
     cases = [(None, {}), ("non-condensable gas", {"P_NCG": 150e3})]
@@ -355,7 +355,7 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     first = fault_benchmark(settings, "model", 1, cases)
     assert [r["fault"] for r in first.runs] == [None, "non-condensable gas"]
     gas = first.runs[1]
-    assert gas["true_intensity"] == 150e3
+    assert gas["true_intensity"] == 150e3 and gas["later_seconds"] == LATER_SECONDS
     assert gas["intensity_low"] <= gas["intensity_mean"] <= gas["intensity_high"]
     # the row keeps the model's own reading too, from which the form error is measured
     assert gas["model_form"] == MODEL_FORM and gas["model_sd"] > 0
