@@ -514,7 +514,7 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_validate_options(parser: argparse.ArgumentParser) -> None:
-    from pymc_vcc.studies.fault_benchmark import LATER_SECONDS
+    from pymc_vcc.studies.fault_benchmark import LATER_SECONDS, PROFILE_SECONDS
     from pymc_vcc.studies.validation import METHODS
 
     parser.add_argument("--reference", type=float, default=1.5, metavar="KG", help="true charge")
@@ -545,7 +545,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         type=_positive(float),
         default=LATER_SECONDS,
         help=f"with --faults: length of each later record, s (default {LATER_SECONDS:.0f}; at "
-        "most the built-in profile's 2120)",
+        f"most the built-in profile's {PROFILE_SECONDS:.0f})",
     )
     parser.add_argument(
         "--alarm",

@@ -97,6 +97,8 @@ UNIT_CHARGES = (1.3, 1.8)  # kg: a unit's commissioned charge is drawn between t
 LATER_SECONDS = 1060.0
 """Length of each later record, s (the commissioning record's: the first 1060 s of the built-in
 profile)."""
+PROFILE_SECONDS = float(builtin_inputs()["time"].values[-1])
+"""Length of the built-in profile, s: the longest later record."""
 RUNS_CHECKPOINT = "validate-faults"
 
 
@@ -372,11 +374,10 @@ def fault_benchmark(
         raise ValueError(f"n_units must be at least 1, got {n_units}")
     check_rounds(rounds)
     check_method(method)
-    profile_end = float(builtin_inputs()["time"].values[-1])
-    if not 0.0 < later_seconds <= profile_end:
+    if not 0.0 < later_seconds <= PROFILE_SECONDS:
         raise ValueError(
             f"later_seconds = {later_seconds} s: a later record lies in the built-in profile, "
-            f"(0, {profile_end:.0f}] s"
+            f"(0, {PROFILE_SECONDS:.0f}] s"
         )
     known = {f.name for f in FAULTS}
     unknown = [name for name, _ in cases if name is not None and name not in known]
