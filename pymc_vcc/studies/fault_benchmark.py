@@ -43,6 +43,7 @@ from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_js
 from pymc_vcc.studies.diagnose import ROUNDS, diagnose, verdict
 from pymc_vcc.studies.faults import FAULTS, beyond_probability
 from pymc_vcc.studies.truths import (
+    RECORD_SECONDS,
     VARIANTS,
     Truth,
     generate_truth,
@@ -94,9 +95,8 @@ evaporator's."""
 UNIT_CHARGES = (1.3, 1.8)  # kg: a unit's commissioned charge is drawn between these
 """Commissioned charges leave room for a 30 % loss and a 20 % gain inside the unit's box
 (0.9-2.2 kg)."""
-LATER_SECONDS = 1060.0
-"""Length of each later record, s (the commissioning record's: the first 1060 s of the built-in
-profile)."""
+LATER_SECONDS = RECORD_SECONDS
+"""Length of each later record, s: the commissioning record's."""
 PROFILE_SECONDS = float(builtin_inputs()["time"].values[-1])
 """Length of the built-in profile, s: the longest later record."""
 RUNS_CHECKPOINT = "validate-faults"
@@ -392,7 +392,8 @@ def fault_benchmark(
         for line in log.read_text().splitlines():
             row = json.loads(line)
             same = row.get("rounds", rounds) == rounds and row.get("method", method) == method
-            if same and row.get("later_seconds", 1060.0) == later_seconds:
+            # a row written before rows kept their length was as long as the commissioning's
+            if same and row.get("later_seconds", RECORD_SECONDS) == later_seconds:
                 done[(row["unit_seed"], row["case"], row["budget"])] = row
     unit = load_unit()
     runs = []

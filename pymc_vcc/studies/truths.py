@@ -53,6 +53,8 @@ WEARING: tuple[str, ...] = ("HTC_CA", "HTC_EA", "FO_FLOW", "FI_FLOW", "CF_LEV", 
 """The parameters a unit's use moves between two records: the coils' air sides (fouling), the
 fans' flows (filters, belts), the valve's and the compressor's flow factors (wear)."""
 SETTLE = 600.0  # s at the first inputs before the record starts
+RECORD_SECONDS = 1060.0
+"""Length of a generated record, s: the paper's calibration window of the built-in profile."""
 ACCURACY = SensorAccuracy()
 """Bounds of the sensors' constant errors and of the inputs' logging errors: the typical
 accuracy classes (±0.5 K, ±1 % of a pressure, ±2 % of a flow; inputs ±0.5 K, ±1 % speed,
@@ -158,7 +160,7 @@ def generate_truth(
     unit: Unit | None = None,
     inputs: xr.Dataset | None = None,
     charge: float | None = None,
-    t_end: float = 1060.0,
+    t_end: float = RECORD_SECONDS,
     parameters: Mapping[str, float] | None = None,
     n_volumes: int | None = None,
     solver: str | Solver = "cvode",
