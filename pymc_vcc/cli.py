@@ -213,6 +213,7 @@ def _validate(args: argparse.Namespace) -> int:
             rounds=ROUNDS if args.rounds is None else args.rounds,
             method=args.method,
             later_seconds=args.later_seconds,
+            later_start=args.later_start,
         )
         text = f"{scored.format_table()}\n\n{scored.wall_seconds:.0f} s"
         return _report(args, text, scored.summary())
@@ -546,6 +547,15 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         default=LATER_SECONDS,
         help=f"with --faults: length of each later record, s (default {LATER_SECONDS:.0f}; at "
         f"most the built-in profile's {PROFILE_SECONDS:.0f})",
+    )
+    parser.add_argument(
+        "--later-start",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="with --faults: where in the built-in profile each later record begins, s "
+        "(default 0: at the commissioning's operating points; 1060: at others, as on another "
+        "day's weather)",
     )
     parser.add_argument(
         "--alarm",

@@ -144,18 +144,22 @@ def test_a_commissioning_is_calibrated_again_up_to_its_attempts(capsys):
 
 
 @pytest.mark.parametrize(
-    ("options", "rounds", "method", "seconds"),
+    ("options", "rounds", "method", "seconds", "start"),
     [
-        ([], None, "likelihood", None),
-        (["--rounds", "1", "--method", "rejection", "--later-seconds", "600"], 1, "rejection", 600),
+        ([], None, "likelihood", None, 0.0),
+        (
+            ["--rounds", "1", "--method", "rejection", "--later-seconds", "600"],
+            *(1, "rejection", 600, 0.0),
+        ),
+        (["--later-start", "1060"], None, "likelihood", None, 1060.0),
     ],
 )
 def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
-    monkeypatch, options, rounds, method, seconds
+    monkeypatch, options, rounds, method, seconds, start
 ):
     """``validate --faults`` diagnoses as ``diagnose`` does unless told otherwise: its rounds
     (:data:`ROUNDS`, not the real-units benchmark's one) and sampler reach every diagnosis, and
-    its later records are as long as asked."""
+    its later records are as long and start where asked."""
     import pymc_vcc.cli as cli
     from pymc_vcc.studies import fault_benchmark as benchmark
     from pymc_vcc.studies.diagnose import ROUNDS
@@ -175,6 +179,7 @@ def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
         "rounds": rounds or ROUNDS,
         "method": method,
         "later_seconds": later_seconds,
+        "later_start": start,
     }
 
 
@@ -188,3 +193,7 @@ def test_a_fault_benchmark_refuses_bad_rounds_or_sampler_before_any_simulation()
         fault_benchmark(StudySettings(), "all", 1, method="mcmc")
     with pytest.raises(ValueError, match=r"later_seconds = 3000.0 s: .* \(0, 2120\] s"):
         fault_benchmark(StudySettings(), "all", 1, later_seconds=3000.0)
+    with pytest.raises(ValueError, match=r"later_start = 1500.0 s: .* starts in \[0, 1060\] s"):
+        fault_benchmark(StudySettings(), "all", 1, later_start=1500.0)
+    with pytest.raises(ValueError, match=r"later_start = -1.0 s"):
+        fault_benchmark(StudySettings(), "all", 1, later_start=-1.0)

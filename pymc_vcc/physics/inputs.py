@@ -393,14 +393,25 @@ def with_settling(inputs: xr.Dataset, seconds: float) -> xr.Dataset:
     return settled
 
 
-def window(inputs: xr.Dataset, t_end: float) -> xr.Dataset:
-    """The profile cut at ``t_end`` seconds (which must lie inside it)."""
+def window(inputs: xr.Dataset, t_end: float, t_start: float = 0.0) -> xr.Dataset:
+    """The profile from ``t_start`` to ``t_end`` seconds (both inside it), its time counted from
+    ``t_start``: the inputs held at ``t_start`` begin it, those held at ``t_end`` end it."""
     time = np.asarray(inputs["time"].values, dtype=float)
     if not 0.0 < t_end <= time[-1]:
         raise ValueError(f"t_end = {t_end} s must lie in (0, {time[-1]}] s")
-    before = time < t_end
-    cut = inputs.isel(time=np.flatnonzero(before))
-    last = inputs.isel(time=[int(np.flatnonzero(before)[-1])]).assign_coords(time=[t_end])
-    cut = xr.concat([cut, last], dim="time")
+    if not 0.0 <= t_start < t_end:
+        raise ValueError(f"t_start = {t_start} s must lie in [0, t_end = {t_end}) s")
+    held = np.flatnonzero(time <= t_start)[-1]
+    inside = np.flatnonzero((time > t_start) & (time < t_end))
+    last = np.flatnonzero(time < t_end)[-1]
+    cut = xr.concat(
+        [
+            inputs.isel(time=[held]).assign_coords(time=[t_start]),
+            inputs.isel(time=inside),
+            inputs.isel(time=[last]).assign_coords(time=[t_end]),
+        ],
+        dim="time",
+    )
+    cut = cut.assign_coords(time=cut["time"].values - t_start)
     cut["time"].attrs["units"] = "s"
     return cut

@@ -354,6 +354,7 @@ def fault_benchmark(
     rounds: int = ROUNDS,
     method: str = "likelihood",
     later_seconds: float = LATER_SECONDS,
+    later_start: float = 0.0,
 ) -> FaultBenchmarkResult:
     """Run the benchmark (see the module docstring).
 
@@ -365,8 +366,12 @@ def fault_benchmark(
         rounds, method: each diagnosis's (:func:`~pymc_vcc.studies.diagnose.diagnose`); a
             resumed benchmark reuses only the rows of its rounds and method (a row written before
             rows kept them counts as any).
-        later_seconds: length of each later record, s (at most the built-in profile's); a
-            resumed benchmark reuses only the rows of that length (older rows are 1060 s).
+        later_seconds: length of each later record, s; a resumed benchmark reuses only the
+            rows of that length (older rows are 1060 s).
+        later_start: where in the built-in profile each later record begins, s (0: at the
+            commissioning record's operating points; 1060: at others, as on another day's
+            weather); the record must end inside the profile. A resumed benchmark reuses only
+            the rows of that start (older rows start at 0).
     """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
@@ -378,6 +383,11 @@ def fault_benchmark(
         raise ValueError(
             f"later_seconds = {later_seconds} s: a later record lies in the built-in profile, "
             f"(0, {PROFILE_SECONDS:.0f}] s"
+        )
+    if not 0.0 <= later_start <= PROFILE_SECONDS - later_seconds:
+        raise ValueError(
+            f"later_start = {later_start} s: a later record of {later_seconds:.0f} s ends inside "
+            f"the built-in profile, so it starts in [0, {PROFILE_SECONDS - later_seconds:.0f}] s"
         )
     known = {f.name for f in FAULTS}
     unknown = [name for name, _ in cases if name is not None and name not in known]
@@ -392,8 +402,9 @@ def fault_benchmark(
         for line in log.read_text().splitlines():
             row = json.loads(line)
             same = row.get("rounds", rounds) == rounds and row.get("method", method) == method
-            # a row written before rows kept their length was as long as the commissioning's
-            if same and row.get("later_seconds", RECORD_SECONDS) == later_seconds:
+            # a row written before rows kept their window was the commissioning record's
+            window = row.get("later_seconds", RECORD_SECONDS), row.get("later_start", 0.0)
+            if same and window == (later_seconds, later_start):
                 done[(row["unit_seed"], row["case"], row["budget"])] = row
     unit = load_unit()
     runs = []
@@ -412,7 +423,7 @@ def fault_benchmark(
                 case_started = time.perf_counter()
                 worn = worn_parameters(unit, healthy.parameters, np.random.default_rng([seed, n]))
                 parameters, intensity = _faulted(unit, healthy.parameters, worn, case)
-                later = record_again(healthy, seed + n + 1, parameters, later_seconds)
+                later = record_again(healthy, seed + n + 1, parameters, later_seconds, later_start)
                 diagnosis = diagnose(
                     later.observed,
                     later.inputs,
@@ -434,6 +445,7 @@ def fault_benchmark(
                     "rounds": rounds,
                     "method": method,
                     "later_seconds": later_seconds,
+                    "later_start": later_start,
                     "seconds": time.perf_counter() - case_started,
                 }
                 if log is not None:

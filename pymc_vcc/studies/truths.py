@@ -121,16 +121,24 @@ def worn_parameters(
 
 
 def record_again(
-    earlier: Truth, seed: int, parameters: Mapping[str, float], t_end: float | None = None
+    earlier: Truth,
+    seed: int,
+    parameters: Mapping[str, float],
+    seconds: float | None = None,
+    start: float = 0.0,
 ) -> Truth:
-    """The unit of ``earlier`` recorded again with ``parameters`` (the charge among them), over
-    the built-in input profile for ``t_end`` s (None: as long as ``earlier``): its coils,
-    sensors and logger as they were, its noise new (drawn from ``seed``)."""
+    """The unit of ``earlier`` recorded again with ``parameters`` (the charge among them) for
+    ``seconds`` (None: as long as ``earlier``), over the built-in input profile from ``start``
+    s on (0: the operating points ``earlier`` saw; later: others, as on another day's
+    weather): its coils, sensors and logger as they were, its noise new (drawn from
+    ``seed``)."""
+    length = float(earlier.observed["time"].values[-1]) if seconds is None else seconds
     return generate_truth(
         earlier.variant,
         seed,
+        inputs=window(builtin_inputs(), start + length, start),
         charge=parameters["M0"],
-        t_end=float(earlier.observed["time"].values[-1]) if t_end is None else t_end,
+        t_end=length,
         parameters=parameters,
         n_volumes=earlier.n_volumes,
         sensors=earlier,

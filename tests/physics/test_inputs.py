@@ -52,6 +52,21 @@ def test_window_cuts_and_keeps_the_held_value():
         window(builtin_inputs(), 5000.0)
 
 
+def test_a_window_from_a_later_start_counts_its_time_from_there():
+    """The profile's second half as a record of its own: it begins with the inputs held at its
+    start (58 Hz from 1060 s), its steps keep their spacing, it ends with the last held ones."""
+    profile = builtin_inputs()
+    second = window(profile, 2120.0, 1060.0)
+    assert float(second.time[0]) == 0.0 and float(second.time[-1]) == 1060.0
+    assert float(second.compressor_speed[0]) == 58.0 and float(second.time[1]) == 120.0
+    inside = window(profile, 1000.0, 100.0)  # a start between two steps holds the earlier one
+    assert float(inside.compressor_speed[0]) == 55.0 and float(inside.time[1]) == 20.0
+    assert float(inside.compressor_speed[1]) == 65.0 and float(inside.time[-1]) == 900.0
+    np.testing.assert_array_equal(window(profile, 1060.0, 0.0).time, window(profile, 1060.0).time)
+    with pytest.raises(ValueError, match=r"t_start = 1060\.0 s must lie in"):
+        window(profile, 1060.0, 1060.0)
+
+
 def test_csv_round_trip_converts_celsius(tmp_path):
     path = tmp_path / "profile.csv"
     path.write_text(HEADER + "0,0.4,55,35,27\n100,0.5,60,30,25\n200,0.5,60,30,25\n")

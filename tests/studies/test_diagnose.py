@@ -356,6 +356,7 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     assert [r["fault"] for r in first.runs] == [None, "non-condensable gas"]
     gas = first.runs[1]
     assert gas["true_intensity"] == 150e3 and gas["later_seconds"] == LATER_SECONDS
+    assert gas["later_start"] == 0.0
     assert gas["intensity_low"] <= gas["intensity_mean"] <= gas["intensity_high"]
     # the row keeps the model's own reading too, from which the form error is measured
     assert gas["model_form"] == MODEL_FORM and gas["model_sd"] > 0
@@ -407,6 +408,8 @@ def test_a_resumed_fault_benchmark_reuses_only_the_rows_of_its_rounds_and_length
     assert benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, later_seconds=1060.0)
     with pytest.raises(Commissioning):
         benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, later_seconds=2120.0)
+    with pytest.raises(Commissioning):  # a row written before rows kept their start began at 0
+        benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, later_start=1060.0)
 
 
 def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():

@@ -96,9 +96,15 @@ def test_a_later_record_keeps_the_units_sensors_and_logger():
     assert not np.array_equal(later.observed["TD"].values, first.observed["TD"].values)
     fresh = generate_truth("all", seed=9, charge=CHARGE, t_end=300.0, parameters=first.parameters)
     assert fresh.biases != first.biases
-    longer = record_again(first, 9, first.parameters, t_end=420.0)
+    longer = record_again(first, 9, first.parameters, seconds=420.0)
     assert longer.observed["time"].values[-1] == 420.0 and longer.biases == first.biases
     assert longer.input_offsets == first.input_offsets
+    # another day: the profile from 120 s on, whose compressor starts at 65 Hz, not 55 Hz
+    elsewhere = record_again(first, 9, first.parameters, seconds=300.0, start=120.0)
+    assert elsewhere.observed["time"].values[-1] == 300.0 and elsewhere.lags == first.lags
+    logged = 0.02  # the logger's relative error on a speed is within 1 % + 1/3 %
+    assert float(first.inputs["compressor_speed"][0]) == pytest.approx(55.0, rel=logged)
+    assert float(elsewhere.inputs["compressor_speed"][0]) == pytest.approx(65.0, rel=logged)
 
 
 def test_a_month_of_wear_moves_the_wearing_parameters_a_little_and_nothing_else():
