@@ -5,7 +5,9 @@
 ``docs/results/runs/``. Run ``.venv/bin/python scripts/fault_tables.py ROWS.jsonl``: the score
 (:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), the scores of each case, the
 cases not diagnosed correctly or whose interval misses, and what the verdicts would have scored
-at other naming probabilities (:func:`~pymc_vcc.studies.fault_benchmark.rescored`).
+at other naming probabilities (:func:`~pymc_vcc.studies.fault_benchmark.rescored`), beside
+what a reading without bias would have named
+(:func:`~pymc_vcc.studies.fault_benchmark.unbiased_naming`, for rows that keep the readings).
 """
 
 from __future__ import annotations
@@ -16,7 +18,13 @@ import sys
 from pathlib import Path
 
 from pymc_vcc.studies.diagnose import NAMED
-from pymc_vcc.studies.fault_benchmark import CASES, case_label, rescored, summarise_cases
+from pymc_vcc.studies.fault_benchmark import (
+    CASES,
+    case_label,
+    rescored,
+    summarise_cases,
+    unbiased_naming,
+)
 from pymc_vcc.studies.faults import FAULTS
 
 CATEGORIES = ("false alarm", "misdiagnosis", "missed detection", "no response")
@@ -122,14 +130,17 @@ def _failures(rows: list[dict]) -> str:
 
 
 def _trade_off(rows: list[dict]) -> str:
+    widths = all("model_reads" in r for r in rows if r["fault"] is not None)
     lines = [
         "| naming probability | false alarms | correct diagnosis | misdiagnosis | missed "
-        "detection | no response |",
-        "|---:|---:|---:|---:|---:|---:|",
+        "detection | no response |" + (" named if read without bias |" if widths else ""),
+        "|---:|---:|---:|---:|---:|---:|" + ("---:|" if widths else ""),
     ]
     for named in NAMING_PROBABILITIES:
         t = summarise_cases(rescored(rows, named))
-        rates = (t[key] for key in TRADE_OFF_RATES)
+        rates = [t[key] for key in TRADE_OFF_RATES]
+        if widths:
+            rates.append(unbiased_naming(rows, named))
         mark = f"**{named}** (default)" if named == NAMED else f"{named}"
         lines.append(f"| {mark} | " + " | ".join(f"{100 * r:.0f} %" for r in rates) + " |")
     return "\n".join(lines)

@@ -41,7 +41,7 @@ from pymc_vcc.physics.inputs import builtin_inputs
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import ROUNDS, diagnose, verdict
-from pymc_vcc.studies.faults import FAULTS, beyond_probability
+from pymc_vcc.studies.faults import FAULTS, MODEL_FORM, beyond_probability
 from pymc_vcc.studies.truths import (
     RECORD_SECONDS,
     VARIANTS,
@@ -225,6 +225,33 @@ def _case_row(fault_name: str | None, intensity: float, diagnosis) -> dict:
             "model_form": diagnosis.model_form,
         }
     return row
+
+
+def unbiased_naming(rows: Sequence[dict], named: float, model_form: float = MODEL_FORM) -> float:
+    """The share of the faulted cases whose fault would be named at ``named`` if the model read
+    each fault without bias: each case's reading draws (its row's ``model_reads``) moved to
+    centre on the true intensity, their spread kept, the form error spread over them
+    (:func:`~pymc_vcc.studies.faults.beyond_probability`). The ceiling the readings' widths
+    (what the record tells of the fault) set on correct diagnosis: above it lies only what
+    narrower readings name, not less biased ones.
+
+    Args:
+        rows: the cases' rows as :func:`fault_benchmark` keeps them.
+        named: the naming probability.
+        model_form: the form error's relative sd.
+    """
+    thresholds = {fault.name: fault.threshold for fault in FAULTS}
+    faulted = [row for row in rows if row["fault"] is not None]
+    if any("model_reads" not in row for row in faulted):
+        raise ValueError("these rows keep no model_reads: their readings' widths are unknown")
+    if not faulted:
+        return float("nan")
+    hits = 0
+    for row in faulted:
+        reads = np.array(row["model_reads"][row["fault"]])
+        centred = reads - reads.mean() + row["true_intensity"]
+        hits += beyond_probability(centred, thresholds[row["fault"]], model_form) >= named
+    return hits / len(faulted)
 
 
 def model_form_needed(rows: Sequence[dict], coverage: float = 0.95) -> float:
@@ -520,4 +547,5 @@ __all__ = [
     "rescored",
     "score",
     "summarise_cases",
+    "unbiased_naming",
 ]

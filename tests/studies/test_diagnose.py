@@ -304,6 +304,27 @@ def test_rows_are_scored_again_at_another_form_error_from_the_models_reads():
         rescored([{"fault": gas, "probabilities": {}}], 0.9, model_form=0.1)
 
 
+def test_unbiased_naming_moves_each_reading_onto_its_truth_and_keeps_its_width():
+    """A 100 kPa gas (threshold 50) read 20-40 kPa: moved onto 100 ± 10 kPa it is beyond 50
+    for sure, named; read 40-160 kPa for 60 kPa, moved onto 0-120, 2 of 3 draws are beyond
+    (P 2/3 without form error), named at 0.6, not at 0.7 nor 0.9; healthy cases are not
+    counted, rows without the reads are refused."""
+    from pymc_vcc.studies.fault_benchmark import unbiased_naming
+
+    gas = "non-condensable gas"
+
+    def case(reads, truth):
+        return {"fault": gas, "true_intensity": truth, "model_reads": {gas: reads}}
+
+    narrow, wide = case([20e3, 30e3, 40e3], 100e3), case([40e3, 100e3, 160e3], 60e3)
+    assert unbiased_naming([narrow, wide, {"fault": None}], 0.9) == 0.5
+    assert unbiased_naming([narrow], 0.9, model_form=0.0) == 1.0
+    assert unbiased_naming([wide], 0.6, model_form=0.0) == 1.0
+    assert unbiased_naming([wide], 0.7, model_form=0.0) == 0.0
+    with pytest.raises(ValueError, match="keep no model_reads"):
+        unbiased_naming([{"fault": gas}], 0.9)
+
+
 def test_score_table_counts_rates_among_healthy_and_faulted_cases():
     from pymc_vcc.studies.fault_benchmark import summarise_cases
 
