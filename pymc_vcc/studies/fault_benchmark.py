@@ -100,6 +100,7 @@ LATER_SECONDS = RECORD_SECONDS
 PROFILE_SECONDS = float(builtin_inputs()["time"].values[-1])
 """Length of the built-in profile, s: the longest later record."""
 RUNS_CHECKPOINT = "validate-faults"
+_THRESHOLDS = {fault.name: fault.threshold for fault in FAULTS}  # by name, as rows name faults
 
 
 @dataclass
@@ -178,7 +179,6 @@ def rescored(rows: Sequence[dict], named: float, model_form: float | None = None
         named: the naming probability.
         model_form: the form error's relative sd (None: the rows' own probabilities).
     """
-    thresholds = {fault.name: fault.threshold for fault in FAULTS}
     again = []
     for row in rows:
         probabilities = row["probabilities"]
@@ -186,7 +186,7 @@ def rescored(rows: Sequence[dict], named: float, model_form: float | None = None
             if "model_reads" not in row:
                 raise ValueError("these rows keep no model_reads: score them at their form error")
             probabilities = {
-                name: beyond_probability(np.array(reads), thresholds[name], model_form)
+                name: beyond_probability(np.array(reads), _THRESHOLDS[name], model_form)
                 for name, reads in row["model_reads"].items()
             }
         text, _ = verdict(probabilities, named)
@@ -240,7 +240,6 @@ def unbiased_naming(rows: Sequence[dict], named: float, model_form: float = MODE
         named: the naming probability.
         model_form: the form error's relative sd.
     """
-    thresholds = {fault.name: fault.threshold for fault in FAULTS}
     faulted = [row for row in rows if row["fault"] is not None]
     if any("model_reads" not in row for row in faulted):
         raise ValueError("these rows keep no model_reads: their readings' widths are unknown")
@@ -250,7 +249,7 @@ def unbiased_naming(rows: Sequence[dict], named: float, model_form: float = MODE
     for row in faulted:
         reads = np.array(row["model_reads"][row["fault"]])
         centred = reads - reads.mean() + row["true_intensity"]
-        hits += beyond_probability(centred, thresholds[row["fault"]], model_form) >= named
+        hits += beyond_probability(centred, _THRESHOLDS[row["fault"]], model_form) >= named
     return hits / len(faulted)
 
 
