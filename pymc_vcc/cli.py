@@ -515,7 +515,7 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_validate_options(parser: argparse.ArgumentParser) -> None:
-    from pymc_vcc.studies.fault_benchmark import LATER_SECONDS, PROFILE_SECONDS
+    from pymc_vcc.studies.fault_benchmark import LATER_SECONDS, LATER_START, PROFILE_SECONDS
     from pymc_vcc.studies.validation import METHODS
 
     parser.add_argument("--reference", type=float, default=1.5, metavar="KG", help="true charge")
@@ -551,11 +551,11 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--later-start",
         type=float,
-        default=0.0,
+        default=LATER_START,
         metavar="SECONDS",
         help="with --faults: where in the built-in profile each later record begins, s "
-        "(default 0: at the commissioning's operating points; 1060: at others, as on another "
-        "day's weather)",
+        f"(default {LATER_START:.0f}: at the commissioning's operating points; "
+        f"{PROFILE_SECONDS - LATER_SECONDS:.0f}: at others, as on another day's weather)",
     )
     parser.add_argument(
         "--alarm",

@@ -97,6 +97,9 @@ UNIT_CHARGES = (1.3, 1.8)  # kg: a unit's commissioned charge is drawn between t
 (0.9-2.2 kg)."""
 LATER_SECONDS = RECORD_SECONDS
 """Length of each later record, s: the commissioning record's."""
+LATER_START = 0.0
+"""Where in the built-in profile each later record begins, s: where the commissioning record
+began, at its operating points."""
 PROFILE_SECONDS = float(builtin_inputs()["time"].values[-1])
 """Length of the built-in profile, s: the longest later record."""
 RUNS_CHECKPOINT = "validate-faults"
@@ -380,7 +383,7 @@ def fault_benchmark(
     rounds: int = ROUNDS,
     method: str = "likelihood",
     later_seconds: float = LATER_SECONDS,
-    later_start: float = 0.0,
+    later_start: float = LATER_START,
 ) -> FaultBenchmarkResult:
     """Run the benchmark (see the module docstring).
 
@@ -429,7 +432,7 @@ def fault_benchmark(
             row = json.loads(line)
             same = row.get("rounds", rounds) == rounds and row.get("method", method) == method
             # a row written before rows kept their window was the commissioning record's
-            window = row.get("later_seconds", RECORD_SECONDS), row.get("later_start", 0.0)
+            window = row.get("later_seconds", RECORD_SECONDS), row.get("later_start", LATER_START)
             if same and window == (later_seconds, later_start):
                 done[(row["unit_seed"], row["case"], row["budget"])] = row
     unit = load_unit()
