@@ -2,8 +2,10 @@
 
 ``pymc-vcc validate --faults all --out DIR`` appends one JSON row per case to
 ``DIR/checkpoints/validate-faults.jsonl``; the measured rows behind the docs are kept in
-``docs/results/runs/``. Run ``.venv/bin/python scripts/fault_tables.py ROWS.jsonl``: the score
-(:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), the scores of each case, the
+``docs/results/runs/``. Run ``.venv/bin/python scripts/fault_tables.py ROWS.jsonl [MORE.jsonl
+...]`` (several runs' rows are pooled): the score
+(:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), correct diagnosis by the fault's
+size (:func:`~pymc_vcc.studies.fault_benchmark.correct_by_size`), the scores of each case, the
 cases not diagnosed correctly or whose interval misses, and what the verdicts would have scored
 at other naming probabilities (:func:`~pymc_vcc.studies.fault_benchmark.rescored`), beside
 what a reading without bias would have named
@@ -21,6 +23,7 @@ from pymc_vcc.studies.diagnose import NAMED
 from pymc_vcc.studies.fault_benchmark import (
     CASES,
     case_label,
+    correct_by_size,
     rescored,
     summarise_cases,
     unbiased_naming,
@@ -77,6 +80,18 @@ def _summary(rows: list[dict]) -> str:
         f"| simulations a case (mean) | {t['simulations']:.0f} |",
         f"| wall time a case (median) | {t['seconds']:.0f} s |",
     ]
+    return "\n".join(lines)
+
+
+def _by_size(rows: list[dict]) -> str:
+    lines = [
+        "| the fault's size, in thresholds | faulted cases | correct diagnosis |",
+        "|---|---:|---:|",
+    ]
+    for low, high, cases, share in correct_by_size(rows):
+        band = f"{low:g} or more" if high == float("inf") else f"{low:g} to {high:g}"
+        named = f"{round(share * cases)} ({100 * share:.0f} %)" if cases else "—"
+        lines.append(f"| {band} | {cases} | {named} |")
     return "\n".join(lines)
 
 
@@ -146,10 +161,11 @@ def _trade_off(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def main(path: str) -> None:
-    rows = [json.loads(line) for line in Path(path).read_text().splitlines()]
-    print(_summary(rows), _by_case(rows), _failures(rows), _trade_off(rows), sep="\n\n")
+def main(paths: list[str]) -> None:
+    rows = [json.loads(line) for path in paths for line in Path(path).read_text().splitlines()]
+    tables = (_summary(rows), _by_size(rows), _by_case(rows), _failures(rows), _trade_off(rows))
+    print(*tables, sep="\n\n")
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:])
+    main(sys.argv[1:])

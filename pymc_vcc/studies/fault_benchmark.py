@@ -102,6 +102,10 @@ LATER_START = 0.0
 began, at its operating points."""
 PROFILE_SECONDS = float(builtin_inputs()["time"].values[-1])
 """Length of the built-in profile, s: the longest later record."""
+SIZE_EDGES = (1.0, 1.75)
+"""Where the bands of fault sizes begin, in units of each fault's threshold, in which correct
+diagnosis is scored apart (:func:`correct_by_size`): near the threshold (the benchmark's
+second severities, 1.4-1.6 times it) and well beyond it (its first, about twice or more)."""
 RUNS_CHECKPOINT = "validate-faults"
 _THRESHOLDS = {fault.name: fault.threshold for fault in FAULTS}  # by name, as rows name faults
 
@@ -127,6 +131,12 @@ class FaultBenchmarkResult:
             f"correct diagnosis: {t['correct_rate']:.2f} of the faulted cases; misdiagnosis "
             f"{t['misdiagnosis_rate']:.2f}, missed detection {t['missed_rate']:.2f}, no response "
             f"{t['no_response_rate']:.2f}",
+            "correct diagnosis by the fault's size: "
+            + "; ".join(
+                f"{share:.2f} of {cases} at {_band(low, high)} its threshold"
+                for low, high, cases, share in t["by_size"]
+                if cases
+            ),
             f"severity error (median): {t['median_severity_error']:.2f} of the intensity; "
             f"intensity inside its 95 % interval: {t['intensity_coverage']:.2f}; the model's form "
             f"error these cases ask for (95 %): {t['model_form_needed']:.3f}",
@@ -143,6 +153,11 @@ class FaultBenchmarkResult:
                 f"{row['severity_error']:>14.2f}  {row['covered']:>7.2f}"
             )
         return "\n".join(lines)
+
+
+def _band(low: float, high: float) -> str:
+    """A band of sizes in words: ``1-1.75 times``, ``1.75 times or more``."""
+    return f"{low:g} times or more" if high == float("inf") else f"{low:g}-{high:g} times"
 
 
 def _named(verdict: str) -> list[str]:
@@ -254,6 +269,32 @@ def unbiased_naming(rows: Sequence[dict], named: float, model_form: float = MODE
         centred = reads - reads.mean() + row["true_intensity"]
         hits += beyond_probability(centred, _THRESHOLDS[row["fault"]], model_form) >= named
     return hits / len(faulted)
+
+
+def correct_by_size(
+    rows: Sequence[dict], edges: Sequence[float] = SIZE_EDGES
+) -> list[tuple[float, float, int, float]]:
+    """Correct diagnosis by the fault's size: for each band of true intensities, in units of
+    the fault's threshold, from one edge to the next (the last open), its lower and upper edge,
+    its faulted cases and the share of them named correctly (nan without cases).
+
+    Args:
+        rows: the cases' rows as :func:`fault_benchmark` keeps them.
+        edges: the bands' lower edges, increasing (:data:`SIZE_EDGES`).
+    """
+    if list(edges) != sorted(edges) or len(set(edges)) != len(edges):
+        raise ValueError(f"size edges must increase, got {list(edges)}")
+    sizes = [
+        (row["true_intensity"] / _THRESHOLDS[row["fault"]], row["score"] == "correct diagnosis")
+        for row in rows
+        if row["fault"] is not None
+    ]
+    bands = []
+    for low, high in zip(edges, [*edges[1:], float("inf")], strict=True):
+        named = [right for size, right in sizes if low <= size < high]
+        share = statistics.fmean(named) if named else float("nan")
+        bands.append((float(low), float(high), len(named), share))
+    return bands
 
 
 def model_form_needed(rows: Sequence[dict], coverage: float = 0.95) -> float:
@@ -370,6 +411,7 @@ def summarise_cases(rows: Sequence[dict]) -> dict:
         "simulations": statistics.fmean(r["simulations"] for r in rows),
         "seconds": statistics.median(r["seconds"] for r in rows),
         "by_fault": by_fault,
+        "by_size": correct_by_size(rows),
     }
 
 
@@ -540,10 +582,12 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.D
 
 __all__ = [
     "CASES",
+    "SIZE_EDGES",
     "FaultBenchmarkResult",
     "benchmark_unit",
     "case_label",
     "commission",
+    "correct_by_size",
     "fault_benchmark",
     "model_form_needed",
     "rescored",

@@ -325,6 +325,29 @@ def test_unbiased_naming_moves_each_reading_onto_its_truth_and_keeps_its_width()
         unbiased_naming([{"fault": gas}], 0.9)
 
 
+def test_correct_diagnosis_is_scored_by_the_faults_size_in_thresholds():
+    from pymc_vcc.studies.fault_benchmark import correct_by_size
+
+    def row(fault, intensity, score):
+        return {"fault": fault, "true_intensity": intensity, "score": score}
+
+    rows = [
+        row(None, 0.0, "false alarm"),  # no fault: in no band
+        row("liquid-line restriction", 80e3, "no response"),  # 1.6 thresholds
+        row("liquid-line restriction", 150e3, "correct diagnosis"),  # 3
+        row("undercharge", 0.15, "correct diagnosis"),  # 1.5
+        row("undercharge", 0.2, "missed detection"),  # 2
+        row("overcharge", 0.3, "correct diagnosis"),  # 3
+        row("overcharge", 0.05, "correct diagnosis"),  # below its threshold: in no band
+    ]
+    assert correct_by_size(rows) == [(1.0, 1.75, 2, 0.5), (1.75, float("inf"), 3, 2 / 3)]
+    low, high, cases, share = correct_by_size(rows, (1.0, 1.55, 2.5))[1]
+    assert (low, high, cases, share) == (1.55, 2.5, 2, 0.0)
+    assert np.isnan(correct_by_size(rows[:1])[0][3])  # no faulted case
+    with pytest.raises(ValueError, match="size edges must increase"):
+        correct_by_size(rows, (1.75, 1.0))
+
+
 def test_score_table_counts_rates_among_healthy_and_faulted_cases():
     from pymc_vcc.studies.fault_benchmark import summarise_cases
 
@@ -384,6 +407,9 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     reads = gas["model_reads"]  # and every fault's reading, to score at another form error
     assert set(reads) == {f.name for f in FAULTS} and len(reads[gas["fault"]]) > 1
     assert gas["score"] in ("correct diagnosis", "misdiagnosis", "missed detection", "no response")
+    printed = first.format_table()  # the 150 kPa gas is three thresholds: scored apart
+    assert f"{float(gas['score'] == 'correct diagnosis'):.2f} of 1 at 1.75 times or more" in printed
+    assert "1-1.75 times" not in printed  # no case in that band
     kept = list((tmp_path / "faults" / "checkpoints").glob("validate-faults-unit-*.nc"))
     assert len(kept) == 1
     again = fault_benchmark(
