@@ -107,7 +107,8 @@ PROFILE_SECONDS = float(builtin_inputs()["time"].values[-1])
 SIZE_EDGES = (1.0, 1.75)
 """Where the bands of fault sizes begin, in units of each fault's threshold, in which correct
 diagnosis is scored apart (:func:`correct_by_size`): near the threshold (the benchmark's
-second severities, 1.4-1.6 times it) and well beyond it (its first, about twice or more)."""
+second severities and the condenser's first two cases, 1.1-1.6 times it) and well beyond it
+(its first severities, about twice or more)."""
 RUNS_CHECKPOINT = "validate-faults"
 _THRESHOLDS = {fault.name: fault.threshold for fault in FAULTS}  # by name, as rows name faults
 
