@@ -25,6 +25,7 @@ from pymc_vcc.studies.fault_benchmark import (
     case_label,
     correct_by_size,
     rescored,
+    size_band,
     summarise_cases,
     unbiased_naming,
 )
@@ -89,9 +90,8 @@ def _by_size(rows: list[dict]) -> str:
         "|---|---:|---:|",
     ]
     for low, high, cases, share in correct_by_size(rows):
-        band = f"{low:g} or more" if high == float("inf") else f"{low:g} to {high:g}"
         named = f"{round(share * cases)} ({100 * share:.0f} %)" if cases else "—"
-        lines.append(f"| {band} | {cases} | {named} |")
+        lines.append(f"| {size_band(low, high)} | {cases} | {named} |")
     return "\n".join(lines)
 
 

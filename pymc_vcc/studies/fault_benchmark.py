@@ -27,6 +27,7 @@ commissioning posterior kept beside it), so an interrupted run resumes where it 
 
 from __future__ import annotations
 
+import itertools
 import json
 import statistics
 import time
@@ -136,7 +137,7 @@ class FaultBenchmarkResult:
             f"{t['no_response_rate']:.2f}",
             "correct diagnosis by the fault's size: "
             + "; ".join(
-                f"{share:.2f} of {cases} at {_band(low, high)} its threshold"
+                f"{share:.2f} of {cases} at {size_band(low, high)} its threshold"
                 for low, high, cases, share in t["by_size"]
                 if cases
             ),
@@ -158,8 +159,9 @@ class FaultBenchmarkResult:
         return "\n".join(lines)
 
 
-def _band(low: float, high: float) -> str:
-    """A band of sizes in words: ``1-1.75 times``, ``1.75 times or more``."""
+def size_band(low: float, high: float) -> str:
+    """A band of fault sizes (:func:`correct_by_size`) in words: ``1-1.75 times``, ``1.75
+    times or more``."""
     return f"{low:g} times or more" if high == float("inf") else f"{low:g}-{high:g} times"
 
 
@@ -285,7 +287,7 @@ def correct_by_size(
         rows: the cases' rows as :func:`fault_benchmark` keeps them.
         edges: the bands' lower edges, increasing (:data:`SIZE_EDGES`).
     """
-    if list(edges) != sorted(edges) or len(set(edges)) != len(edges):
+    if any(high <= low for low, high in itertools.pairwise(edges)):
         raise ValueError(f"size edges must increase, got {list(edges)}")
     sizes = [
         (row["true_intensity"] / _THRESHOLDS[row["fault"]], row["score"] == "correct diagnosis")
@@ -595,6 +597,7 @@ __all__ = [
     "model_form_needed",
     "rescored",
     "score",
+    "size_band",
     "summarise_cases",
     "unbiased_naming",
 ]
