@@ -5,8 +5,9 @@
 ``docs/results/runs/``. Run ``.venv/bin/python scripts/fault_tables.py ROWS.jsonl [MORE.jsonl
 ...]`` (several runs' rows are pooled): the score
 (:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), correct diagnosis by the fault's
-size (:func:`~pymc_vcc.studies.fault_benchmark.correct_by_size`), the scores of each case, the
-cases not diagnosed correctly or whose interval misses, and what the verdicts would have scored
+size (:func:`~pymc_vcc.studies.fault_benchmark.correct_by_size`), the scores of each case (of
+the cases of two faults at once apart), the cases not diagnosed correctly or whose interval
+misses, and what the verdicts would have scored
 at other naming probabilities (:func:`~pymc_vcc.studies.fault_benchmark.rescored`), beside
 what a reading without bias would have named
 (:func:`~pymc_vcc.studies.fault_benchmark.unbiased_naming`, for rows that keep the readings).
@@ -56,12 +57,12 @@ def _case_name(label: str) -> str:
 
 def _summary(rows: list[dict]) -> str:
     t = summarise_cases(rows)
-    faulted = [r for r in rows if r["fault"] is not None]
+    faulted = [r for r in rows if isinstance(r["fault"], str)]
     lines = [
         "| | |",
         "|---|---:|",
         f"| false alarms (of the no-fault cases) | {100 * t['false_alarm_rate']:.0f} % |",
-        f"| correct diagnosis (of the faulted cases) | {100 * t['correct_rate']:.0f} % "
+        f"| correct diagnosis (of the cases of one fault) | {100 * t['correct_rate']:.0f} % "
         f"({sum(r['score'] == 'correct diagnosis' for r in faulted)} of {len(faulted)}) |",
         f"| misdiagnosis | {100 * t['misdiagnosis_rate']:.0f} % |",
         f"| missed detection | {100 * t['missed_rate']:.0f} % |",
@@ -103,7 +104,7 @@ def _by_case(rows: list[dict]) -> str:
     ]
     for case in CASES:
         mine = [r for r in rows if r["case"] == case_label(case)]
-        if not mine:
+        if not mine or isinstance(case[0], tuple):
             continue
         right = "correct" if case[0] is None else "correct diagnosis"
         cells = [_case_name(case_label(case)), str(len(mine))]
@@ -129,14 +130,11 @@ def _failures(rows: list[dict]) -> str:
         shown = ", ".join(
             f"{name} {p:.2f}" for name, p in r["probabilities"].items() if p >= SHOWN_PROBABILITY
         )
-        intensity = ""
-        if r["fault"] is not None:
-            unit, factor = {f.name: f.display for f in FAULTS}[r["fault"]]
-            true, mean, low, high = (
-                factor * r[key]
-                for key in ("true_intensity", "intensity_mean", "intensity_low", "intensity_high")
-            )
-            intensity = f"{true:.0f}, {mean:.0f} ({low:.0f}–{high:.0f}) {unit}"
+        if isinstance(r["fault"], str):
+            intensity = _reading(r["fault"], r)
+        else:  # of two faults at once, each one's
+            reads = r.get("faults_read", {})
+            intensity = "; ".join(f"{name}: {_reading(name, read)}" for name, read in reads.items())
         lines.append(
             f"| {r['unit_seed']} | {_case_name(r['case'])} | {r['verdict']} | {shown} | "
             f"{intensity} |"
@@ -144,8 +142,39 @@ def _failures(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _reading(fault: str, read: dict) -> str:
+    """A fault's true intensity and its reading (95 %), in the fault's display unit."""
+    unit, factor = {f.name: f.display for f in FAULTS}[fault]
+    true, mean, low, high = (
+        factor * read[key]
+        for key in ("true_intensity", "intensity_mean", "intensity_low", "intensity_high")
+    )
+    return f"{true:.0f}, {mean:.0f} ({low:.0f}–{high:.0f}) {unit}"
+
+
+def _pairs(rows: list[dict]) -> str:
+    """The cases of two faults at once: how often both, one or a wrong fault was named."""
+    scores = ("correct diagnosis", "partial diagnosis", "misdiagnosis", "missed detection")
+    lines = [
+        "| case | cases | both named | one of them alone | misdiagnosis | missed detection | "
+        "no response | median severity error | covered |",
+        "|---|" + "---:|" * 8,
+    ]
+    for case in CASES:
+        mine = [r for r in rows if r["case"] == case_label(case)]
+        if not mine or not isinstance(case[0], tuple):
+            continue
+        reads = [read for r in mine for read in r["faults_read"].values()]
+        cells = [_case_name(case_label(case)), str(len(mine))]
+        cells += [str(sum(r["score"] == s for r in mine)) for s in (*scores, "no response")]
+        cells.append(f"{statistics.median(read['severity_error'] for read in reads):.2f}")
+        cells.append(f"{sum(read['covered'] for read in reads)}/{len(reads)}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def _trade_off(rows: list[dict]) -> str:
-    widths = all("model_reads" in r for r in rows if r["fault"] is not None)
+    widths = all("model_reads" in r for r in rows if isinstance(r["fault"], str))
     lines = [
         "| naming probability | false alarms | correct diagnosis | misdiagnosis | missed "
         "detection | no response |" + (" named if read without bias |" if widths else ""),
@@ -163,7 +192,10 @@ def _trade_off(rows: list[dict]) -> str:
 
 def main(paths: list[str]) -> None:
     rows = [json.loads(line) for path in paths for line in Path(path).read_text().splitlines()]
-    tables = (_summary(rows), _by_size(rows), _by_case(rows), _failures(rows), _trade_off(rows))
+    tables = [_summary(rows), _by_size(rows), _by_case(rows)]
+    if any(isinstance(r["fault"], list) for r in rows):
+        tables.append(_pairs(rows))
+    tables += [_failures(rows), _trade_off(rows)]
     print(*tables, sep="\n\n")
 
 

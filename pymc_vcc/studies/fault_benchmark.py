@@ -12,7 +12,9 @@ each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A cas
   is named or two are not distinguishable, else ``correct``;
 * faulted cases: ``correct diagnosis`` when the fault is named, ``misdiagnosis`` when another
   is, ``missed detection`` on ``no fault``, ``no response`` when the verdict names none for
-  sure (two faults not distinguishable, or only possible ones);
+  sure (two faults not distinguishable, or only possible ones); with two faults at once,
+  ``correct diagnosis`` when both are named and ``partial diagnosis`` when one is, alone
+  (scored apart from the cases of one fault);
 
 with the severity error (|posterior mean intensity − true intensity| / true intensity) and
 whether the 95 % interval of the intensity covers the truth; the model's own reading (before
@@ -61,9 +63,10 @@ from pymc_vcc.studies.unit_log import (
     record_budget_name,
 )
 
-Case = tuple[str | None, dict[str, float]]
-"""A later record: its fault (None: none) and the changes that make it, id -> a fraction of
-the healthy unit's value (calibration parameters) or the value itself (fault parameters)."""
+Case = tuple[str | tuple[str, str] | None, dict[str, float]]
+"""A later record: its fault (None: none; two names: two faults at once) and the changes that
+make it, id -> a fraction of the healthy unit's value (calibration parameters) or the value
+itself (fault parameters)."""
 
 CASES: tuple[Case, ...] = (
     (None, {}),
@@ -84,6 +87,10 @@ CASES: tuple[Case, ...] = (
     ("liquid-line restriction", {"DP_RESTR": 80e3}),
     ("non-condensable gas", {"P_NCG": 80e3}),
     ("condenser fouling or low outdoor airflow", {"HTC_CA": -0.70}),
+    (("undercharge", "low indoor airflow"), {"M0": -0.20, "FI_FLOW": -0.40}),
+    (("overcharge", "condenser fouling or low outdoor airflow"), {"M0": 0.20, "HTC_CA": -0.70}),
+    (("compressor valve leakage", "liquid-line restriction"), {"F_LEAK": 0.25, "DP_RESTR": 150e3}),
+    (("undercharge", "non-condensable gas"), {"M0": -0.20, "P_NCG": 120e3}),
 )
 """The later records of each unit: no fault (the unit as it was, a 5 % charge loss, 10 % less
 indoor airflow: changes at half their thresholds, which Yuill and Braun count as no fault, so a
@@ -92,8 +99,11 @@ severities: about twice or three times its threshold, then 1.4-1.6 times (the fi
 first twelve, appended so that the cases before keep their seeds). Fouling and low outdoor
 airflow are the condenser's: 60 % off the air-side HTC and 30 % off the outdoor airflow take
 30 % and 26 % off its air-side conductance, both near its threshold, so a third, 70 % off the
-HTC, takes 42 % (appended last); 40 % and 30 % off the indoor airflow take 37 % and 28 % off
-the evaporator's."""
+HTC, takes 42 % (appended after them); 40 % and 30 % off the indoor airflow take 37 % and 28 %
+off the evaporator's. Last, two faults at once, each at its first severity, as they meet in the
+field: a unit short of charge with a dirty filter, a condenser fouled on an overcharged unit,
+leaking compressor valves with a clogged filter-drier, and a unit recharged short without a
+good vacuum (air left in it); a pair is named correctly when the verdict names both."""
 
 UNIT_CHARGES = (1.3, 1.8)  # kg: a unit's commissioned charge is drawn between these
 """Commissioned charges leave room for a 30 % loss and a 20 % gain inside the unit's box
@@ -130,7 +140,9 @@ class FaultBenchmarkResult:
         """The score, as ``pymc-vcc validate --faults`` prints it."""
         t = self.table
         lines = [
-            f"cases: {t['cases']} ({t['no_fault_cases']} without a fault)",
+            f"cases: {t['cases']} ({t['no_fault_cases']} without a fault"
+            + ("" if t["pairs"] is None else f", {t['pairs']['cases']} with two at once")
+            + ")",
             f"false alarms: {t['false_alarm_rate']:.2f} of the no-fault cases",
             f"correct diagnosis: {t['correct_rate']:.2f} of the faulted cases; misdiagnosis "
             f"{t['misdiagnosis_rate']:.2f}, missed detection {t['missed_rate']:.2f}, no response "
@@ -147,6 +159,7 @@ class FaultBenchmarkResult:
             f"leak alarm (P(charge 10 % low) > {ALARM_PROBABILITY}): false alarms "
             f"{t['leak_false_alarm_rate']:.2f} of the no-fault cases; detection "
             + ", ".join(f"{p:.2f} at a {100 * loss:.0f} % loss" for loss, p in t["leak_detection"]),
+            *([] if t["pairs"] is None else [_pairs_line(t["pairs"])]),
             f"simulations per case: {t['simulations']:.0f}; s per case: {t['seconds']:.0f}",
             "",
             "fault                                     cases  correct  severity error  covered",
@@ -157,6 +170,25 @@ class FaultBenchmarkResult:
                 f"{row['severity_error']:>14.2f}  {row['covered']:>7.2f}"
             )
         return "\n".join(lines)
+
+
+def _pairs_line(pairs: dict) -> str:
+    """The score of two faults at once, as ``pymc-vcc validate --faults`` prints it."""
+    shares = ", ".join(
+        f"{label} {pairs[category]:.2f}"
+        for label, category in (
+            ("both named", "correct diagnosis"),
+            ("one of them alone", "partial diagnosis"),
+            ("misdiagnosis", "misdiagnosis"),
+            ("missed detection", "missed detection"),
+            ("no response", "no response"),
+        )
+    )
+    return (
+        f"two faults at once ({pairs['cases']} cases): {shares}; severity error (median) "
+        f"{pairs['median_severity_error']:.2f}; intensities inside their 95 % intervals "
+        f"{pairs['intensity_coverage']:.2f}"
+    )
 
 
 def size_band(low: float, high: float) -> str:
@@ -172,11 +204,12 @@ def _named(verdict: str) -> list[str]:
     return [verdict] if verdict in {f.name for f in FAULTS} else []
 
 
-def score(fault: str | None, verdict: str) -> str:
-    """The Yuill-Braun category of a verdict on a case.
+def score(fault: str | Sequence[str] | None, verdict: str) -> str:
+    """The Yuill-Braun category of a verdict on a case; of two faults at once, ``correct
+    diagnosis`` only when both are named, ``partial diagnosis`` when one is and nothing else.
 
     Args:
-        fault: the case's true fault (None: no fault).
+        fault: the case's true fault (None: no fault; a sequence: faults at once).
         verdict: the diagnosis's verdict.
     """
     named = _named(verdict)
@@ -185,9 +218,12 @@ def score(fault: str | None, verdict: str) -> str:
         return "false alarm" if alarmed else "correct"
     if verdict == "no fault":
         return "missed detection"
-    if named == [fault]:
+    faults = {fault} if isinstance(fault, str) else set(fault)
+    if set(named) == faults:
         return "correct diagnosis"
-    return "misdiagnosis" if named else "no response"
+    if not set(named) <= faults:
+        return "misdiagnosis"
+    return "partial diagnosis" if named else "no response"
 
 
 def rescored(rows: Sequence[dict], named: float, model_form: float | None = None) -> list[dict]:
@@ -220,12 +256,30 @@ def rescored(rows: Sequence[dict], named: float, model_form: float | None = None
     return again
 
 
-def _case_row(fault_name: str | None, intensity: float, diagnosis) -> dict:
+def _reading(truth: float, draws: np.ndarray, read: np.ndarray) -> dict:
+    """A fault's reading against its true intensity: the diagnosis's ``draws`` (the form error
+    spread over them) and the model's own ``read``."""
+    low, high = np.quantile(draws, [0.025, 0.975])
+    return {
+        "true_intensity": truth,
+        "intensity_mean": float(draws.mean()),
+        "intensity_low": float(low),
+        "intensity_high": float(high),
+        "severity_error": abs(float(draws.mean()) - truth) / truth,
+        "covered": bool(low <= truth <= high),
+        "model_mean": float(read.mean()),
+        "model_sd": float(read.std()),
+    }
+
+
+def _case_row(fault: str | tuple[str, str] | None, truths: dict[str, float], diagnosis) -> dict:
+    """A case's row: its verdict and score, every fault's probability and reading; the true
+    fault's reading (of two faults, each one's under ``faults_read``)."""
     row = {
-        "fault": fault_name,
-        "true_intensity": intensity,
+        "fault": list(fault) if isinstance(fault, tuple) else fault,
+        "true_intensity": truths[fault] if isinstance(fault, str) else 0.0,
         "verdict": diagnosis.verdict,
-        "score": score(fault_name, diagnosis.verdict),
+        "score": score(fault, diagnosis.verdict),
         "probabilities": diagnosis.probabilities,
         "simulations": int(diagnosis.tree["sample_stats"]["n_simulations"]),
         "model_reads": {  # every fault's reading, to score again at another form error
@@ -233,20 +287,14 @@ def _case_row(fault_name: str | None, intensity: float, diagnosis) -> dict:
             for name, draws in diagnosis.model_intensities.items()
         },
     }
-    if fault_name is not None:
-        draws = diagnosis.intensities[fault_name]
-        low, high = np.quantile(draws, [0.025, 0.975])
-        read = diagnosis.model_intensities[fault_name]
-        row |= {
-            "intensity_mean": float(draws.mean()),
-            "intensity_low": float(low),
-            "intensity_high": float(high),
-            "severity_error": abs(float(draws.mean()) - intensity) / intensity,
-            "covered": bool(low <= intensity <= high),
-            "model_mean": float(read.mean()),
-            "model_sd": float(read.std()),
-            "model_form": diagnosis.model_form,
-        }
+    readings = {
+        name: _reading(truth, diagnosis.intensities[name], diagnosis.model_intensities[name])
+        for name, truth in truths.items()
+    }
+    if isinstance(fault, str):
+        row |= readings[fault] | {"model_form": diagnosis.model_form}
+    elif fault is not None:
+        row |= {"faults_read": readings, "model_form": diagnosis.model_form}
     return row
 
 
@@ -263,7 +311,7 @@ def unbiased_naming(rows: Sequence[dict], named: float, model_form: float = MODE
         named: the naming probability.
         model_form: the form error's relative sd.
     """
-    faulted = [row for row in rows if row["fault"] is not None]
+    faulted = [row for row in rows if isinstance(row["fault"], str)]
     if any("model_reads" not in row for row in faulted):
         raise ValueError("these rows keep no model_reads: their readings' widths are unknown")
     if not faulted:
@@ -292,7 +340,7 @@ def correct_by_size(
     sizes = [
         (row["true_intensity"] / _THRESHOLDS[row["fault"]], row["score"] == "correct diagnosis")
         for row in rows
-        if row["fault"] is not None
+        if isinstance(row["fault"], str)
     ]
     bands = []
     for low, high in zip(edges, [*edges[1:], float("inf")], strict=True):
@@ -322,7 +370,7 @@ def model_form_needed(rows: Sequence[dict], coverage: float = 0.95) -> float:
     z = float(norm.ppf(0.5 + coverage / 2))
     needed = []
     for row in rows:
-        if row["fault"] is None:
+        if not isinstance(row["fault"], str):
             continue
         if "model_mean" in row:
             mean, sd = row["model_mean"], row["model_sd"]
@@ -337,28 +385,35 @@ def model_form_needed(rows: Sequence[dict], coverage: float = 0.95) -> float:
     return float(np.sort(needed)[rank - 1]) if rank <= len(needed) else float("inf")
 
 
+def case_faults(case: Case) -> tuple[str, ...]:
+    """The faults of a case: none, one, or two at once."""
+    fault = case[0]
+    return () if fault is None else (fault,) if isinstance(fault, str) else tuple(fault)
+
+
 def _faulted(
     unit, healthy: dict[str, float], worn: dict[str, float], case: Case
-) -> tuple[dict[str, float], float]:
+) -> tuple[dict[str, float], dict[str, float]]:
     """The unit's parameters in ``case``, its changes made to the ``worn`` parameters (the
-    ``healthy`` ones a month later; the charge among them, kg), and the fault's true intensity
-    (against the healthy unit, as the diagnosis reads it against commissioning)."""
-    fault_name, changes = case
+    ``healthy`` ones a month later; the charge among them, kg), and each of its faults' true
+    intensity (against the healthy unit, as the diagnosis reads it against commissioning)."""
     moved = dict(worn)
-    for pid, change in changes.items():
+    for pid, change in case[1].items():
         moved[pid] = change if pid in unit.faults.ids else worn[pid] * (1 + change)
-    if fault_name is None:
-        return moved, 0.0
-    fault = {f.name: f for f in FAULTS}[fault_name]
     before = {pid: np.array([healthy.get(pid, 0.0)]) for pid in moved}
     after = {pid: np.array([value]) for pid, value in moved.items()}
-    return moved, float(fault.intensity(after, before, unit)[0])
+    faults = {f.name: f for f in FAULTS}
+    return moved, {
+        name: float(faults[name].intensity(after, before, unit)[0]) for name in case_faults(case)
+    }
 
 
 def case_label(case: Case) -> str:
-    """A case's key in the benchmark's rows: ``fault: {"ID": change, ...}``."""
-    fault_name, changes = case
-    return f"{fault_name}: {json.dumps(changes, sort_keys=True)}"
+    """A case's key in the benchmark's rows: ``fault: {"ID": change, ...}`` (two faults at
+    once: ``fault + fault: ...``)."""
+    fault, changes = case
+    name = " + ".join(fault) if isinstance(fault, tuple) else fault
+    return f"{name}: {json.dumps(changes, sort_keys=True)}"
 
 
 def summarise_cases(rows: Sequence[dict]) -> dict:
@@ -368,7 +423,8 @@ def summarise_cases(rows: Sequence[dict]) -> dict:
         rows: the cases' rows as :func:`fault_benchmark` keeps them.
     """
     healthy = [r for r in rows if r["fault"] is None]
-    faulted = [r for r in rows if r["fault"] is not None]
+    faulted = [r for r in rows if isinstance(r["fault"], str)]
+    pairs = [r for r in rows if isinstance(r["fault"], list)]
 
     def rate(subset, category):
         return statistics.fmean(r["score"] == category for r in subset) if subset else float("nan")
@@ -417,6 +473,29 @@ def summarise_cases(rows: Sequence[dict]) -> dict:
         "seconds": statistics.median(r["seconds"] for r in rows),
         "by_fault": by_fault,
         "by_size": correct_by_size(rows),
+        "pairs": _summarise_pairs(pairs) if pairs else None,
+    }
+
+
+def _summarise_pairs(rows: Sequence[dict]) -> dict:
+    """The score of the cases with two faults at once: each category's share, and of their
+    faults' readings the median severity error and the share inside their 95 % intervals."""
+    readings = [read for row in rows for read in row["faults_read"].values()]
+    categories = (
+        "correct diagnosis",
+        "partial diagnosis",
+        "misdiagnosis",
+        "missed detection",
+        "no response",
+    )
+    return {
+        "cases": len(rows),
+        **{
+            category: statistics.fmean(r["score"] == category for r in rows)
+            for category in categories
+        },
+        "median_severity_error": statistics.median(r["severity_error"] for r in readings),
+        "intensity_coverage": statistics.fmean(r["covered"] for r in readings),
     }
 
 
@@ -466,7 +545,7 @@ def fault_benchmark(
             f"the built-in profile, so it starts in [0, {PROFILE_SECONDS - later_seconds:.0f}] s"
         )
     known = {f.name for f in FAULTS}
-    unknown = [name for name, _ in cases if name is not None and name not in known]
+    unknown = [name for case in cases for name in case_faults(case) if name not in known]
     if unknown:
         raise ValueError(f"unknown fault(s) {unknown}; allowed are {sorted(known)}")
     budget = record_budget_name(settings)
@@ -498,7 +577,7 @@ def fault_benchmark(
                     continue
                 case_started = time.perf_counter()
                 worn = worn_parameters(unit, healthy.parameters, np.random.default_rng([seed, n]))
-                parameters, intensity = _faulted(unit, healthy.parameters, worn, case)
+                parameters, truths = _faulted(unit, healthy.parameters, worn, case)
                 later = record_again(healthy, seed + n + 1, parameters, later_seconds, later_start)
                 diagnosis = diagnose(
                     later.observed,
@@ -512,7 +591,7 @@ def fault_benchmark(
                     rounds=rounds,
                     method=method,
                 )
-                row = _case_row(case[0], intensity, diagnosis) | {
+                row = _case_row(case[0], truths, diagnosis) | {
                     "case": key[1],
                     "unit_seed": seed,
                     "variant": variant,
@@ -590,6 +669,7 @@ __all__ = [
     "SIZE_EDGES",
     "FaultBenchmarkResult",
     "benchmark_unit",
+    "case_faults",
     "case_label",
     "commission",
     "correct_by_size",

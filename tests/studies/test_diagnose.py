@@ -268,6 +268,23 @@ def test_cases_are_scored_in_yuill_and_brauns_categories():
     )
 
 
+def test_two_faults_at_once_are_correct_only_when_both_are_named():
+    from pymc_vcc.studies.fault_benchmark import score
+
+    gas, short, leak = "non-condensable gas", "undercharge", "compressor valve leakage"
+    both = [short, gas]
+    assert score(both, f"several: {gas}, {short}") == "correct diagnosis"  # in any order
+    assert score(tuple(both), short) == "partial diagnosis"
+    assert score(both, gas) == "partial diagnosis"
+    assert score(both, leak) == "misdiagnosis"
+    assert score(both, f"several: {short}, {leak}") == "misdiagnosis"  # one right, one wrong
+    assert score(both, "no fault") == "missed detection"
+    assert score(both, f"no fault named; possible: {gas}") == "no response"
+    assert score(both, f"{short} / {gas}: not distinguishable with these sensors") == (
+        "no response"
+    )
+
+
 def test_rows_are_scored_again_at_another_naming_probability():
     """A gas at 0.8 and a healthy record reading gas at 0.6: at 0.9 a possible gas (no
     response) and no alarm; at 0.75 the gas named; at 0.5 a false alarm as well."""
@@ -384,6 +401,48 @@ def test_score_table_counts_rates_among_healthy_and_faulted_cases():
     assert table["by_fault"][gas] == {
         "cases": 2, "correct": 0.5, "severity_error": pytest.approx(0.3), "covered": 0.5
     }  # fmt: skip
+    assert table["pairs"] is None
+
+
+def test_two_faults_at_once_are_scored_apart_from_the_cases_of_one():
+    from pymc_vcc.studies.fault_benchmark import FaultBenchmarkResult, summarise_cases
+
+    gas, short = "non-condensable gas", "undercharge"
+
+    def read(error, covered):
+        return {"severity_error": error, "covered": covered}
+
+    one = {
+        "fault": gas,
+        "score": "correct diagnosis",
+        "severity_error": 0.1,
+        "covered": True,
+        "true_intensity": 100e3,
+        "model_mean": 100e3,
+        "model_sd": 1e3,
+    }
+    pairs = [
+        {"fault": [short, gas], "score": "correct diagnosis", "true_intensity": 0.0,
+         "faults_read": {short: read(0.1, True), gas: read(0.2, True)}},
+        {"fault": [short, gas], "score": "partial diagnosis", "true_intensity": 0.0,
+         "faults_read": {short: read(0.3, True), gas: read(0.9, False)}},
+    ]  # fmt: skip
+    rows = [one, *pairs]
+    for row in rows:
+        row |= {"simulations": 100, "seconds": 1.0, "probabilities": {"undercharge": 0.0}}
+    table = summarise_cases(rows)
+    # the cases of one fault are scored as if the pairs were not there
+    assert table["correct_rate"] == 1.0 and table["by_size"][1][2] == 1
+    assert table["median_severity_error"] == pytest.approx(0.1)
+    assert table["pairs"] == {
+        "cases": 2, "correct diagnosis": 0.5, "partial diagnosis": 0.5, "misdiagnosis": 0.0,
+        "missed detection": 0.0, "no response": 0.0,
+        "median_severity_error": pytest.approx(0.25), "intensity_coverage": 0.75,
+    }  # fmt: skip
+    printed = FaultBenchmarkResult(rows, table).format_table()
+    assert "cases: 3 (0 without a fault, 2 with two at once)" in printed
+    assert "two faults at once (2 cases): both named 0.50, one of them alone 0.50" in printed
+    assert "intensities inside their 95 % intervals 0.75" in printed
 
 
 @pytest.mark.slow
@@ -394,10 +453,15 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     from pymc_vcc.studies.fault_benchmark import LATER_SECONDS, fault_benchmark
     from pymc_vcc.studies.faults import MODEL_FORM
 
-    cases = [(None, {}), ("non-condensable gas", {"P_NCG": 150e3})]
+    gas, leak = "non-condensable gas", "compressor valve leakage"
+    cases = [(None, {}), (gas, {"P_NCG": 150e3}), ((gas, leak), {"P_NCG": 150e3, "F_LEAK": 0.3})]
     settings = StudySettings(budget="smoke", out=tmp_path / "faults", n_workers=2)
     first = fault_benchmark(settings, "model", 1, cases)
-    assert [r["fault"] for r in first.runs] == [None, "non-condensable gas"]
+    assert [r["fault"] for r in first.runs] == [None, gas, [gas, leak]]
+    pair = first.runs[2]  # two faults at once: each one's reading against its truth
+    assert pair["faults_read"][leak]["true_intensity"] == pytest.approx(0.3)
+    assert pair["faults_read"][gas]["true_intensity"] == 150e3
+    assert "two faults at once (1 cases)" in first.format_table()
     gas = first.runs[1]
     assert gas["true_intensity"] == 150e3 and gas["later_seconds"] == LATER_SECONDS
     assert gas["later_start"] == 0.0
@@ -469,17 +533,28 @@ def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
     before = {pid: np.array([value]) for pid, value in healthy.items()}
     relative = [f for f in FAULTS if f.relative]
     for case in CASES:
-        moved, intensity = _faulted(unit, healthy, worn, case)
+        moved, intensities = _faulted(unit, healthy, worn, case)
         fault, changes = case
+        if isinstance(fault, tuple):  # two faults at once: each as it is alone
+            assert len(fault) == 2 and set(intensities) == set(fault)
+            moves = {f.name: f.parameters for f in FAULTS}
+            for name in fault:
+                alone = {pid: c for pid, c in changes.items() if pid in moves[name]}
+                assert intensities[name] == pytest.approx(
+                    _faulted(unit, healthy, worn, (name, alone))[1][name]
+                )
+                assert intensities[name] > {f.name: f.threshold for f in FAULTS}[name]
+            continue
         if fault is None:  # the unit as it was, or changes at most half a fault's threshold,
             # still below three quarters of it with a month's wear
-            assert intensity == 0.0 and set(changes) <= set(healthy)
+            assert intensities == {} and set(changes) <= set(healthy)
             unworn, _ = _faulted(unit, healthy, healthy, case)
             for state, share in ((unworn, 0.5), (moved, 0.75)):
                 after = {pid: np.array([value]) for pid, value in state.items()}
                 for f in relative:
                     assert f.intensity(after, before, unit)[0] <= share * f.threshold + 1e-12, case
             continue
+        intensity = intensities[fault]
         threshold = {f.name: f.threshold for f in FAULTS}[fault]
         assert intensity > threshold  # every case lies beyond its fault's detection threshold
         if fault == "undercharge":
