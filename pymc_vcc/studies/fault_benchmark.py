@@ -144,7 +144,7 @@ class FaultBenchmarkResult:
             + ("" if t["pairs"] is None else f", {t['pairs']['cases']} with two at once")
             + ")",
             f"false alarms: {t['false_alarm_rate']:.2f} of the no-fault cases",
-            f"correct diagnosis: {t['correct_rate']:.2f} of the faulted cases; misdiagnosis "
+            f"correct diagnosis: {t['correct_rate']:.2f} of the cases of one fault; misdiagnosis "
             f"{t['misdiagnosis_rate']:.2f}, missed detection {t['missed_rate']:.2f}, no response "
             f"{t['no_response_rate']:.2f}",
             "correct diagnosis by the fault's size: "
