@@ -127,10 +127,12 @@ def _leak(args: argparse.Namespace) -> int:
         return _record(args)
     if getattr(args, "prior", None) is not None:
         raise ValueError("--prior (a commissioning result) needs a LOG to identify the charge on")
+    from pymc_vcc.physics.inputs import CALIBRATION_SECONDS
     from pymc_vcc.studies import leak_study
 
     inputs = _inputs(args)
-    window = {} if inputs is None else {"t_calibration": min(1060.0, float(inputs["time"][-1]))}
+    end = None if inputs is None else min(CALIBRATION_SECONDS, float(inputs["time"][-1]))
+    window = {} if end is None else {"t_calibration": end}
     result = leak_study(
         _settings(args),
         references_kg=args.references,
@@ -269,7 +271,7 @@ def _identify(args: argparse.Namespace) -> int:
         inputs=_inputs(args),
         parameters=args.parameters,
         at=dict(args.at or []),
-        t_end=args.t_end,
+        **({} if args.t_end is None else {"t_end": args.t_end}),
         step=args.step,
         fit=args.fit or (),
     )
@@ -495,7 +497,8 @@ def _add_leak_options(parser: argparse.ArgumentParser) -> None:
         "--inputs",
         metavar="CSV",
         help="input profile (columns as load_inputs_csv; default: the built-in step profile); "
-        "calibrated over its first 1060 s, or all of it if shorter",
+        "calibrated over the paper's calibration window (its first 1060 s), or all of it if "
+        "shorter",
     )
     parser.add_argument(
         "--references",
@@ -775,9 +778,9 @@ def build_parser() -> argparse.ArgumentParser:
     identify.add_argument(
         "--t-end",
         type=_positive(float),
-        default=1060.0,
         metavar="SECONDS",
-        help="calibration window: the first SECONDS of the profile (default 1060)",
+        help="calibration window: the first SECONDS of the profile (default: the paper's "
+        "calibration window, the first half of the built-in profile)",
     )
     identify.add_argument(
         "--inputs", metavar="CSV", help="input profile (default: the built-in step profile)"

@@ -33,14 +33,14 @@ from typing import Any
 
 import numpy as np
 
-from pymc_vcc.physics.inputs import builtin_inputs, input_segments
+from pymc_vcc.physics.inputs import CALIBRATION_SECONDS, builtin_inputs, input_segments
 from pymc_vcc.physics.integration.callbacks import BoundCycle
 from pymc_vcc.physics.integration.solver import METHODS, get_solver
 from pymc_vcc.physics.refrigerant import load_refrigerant
 from pymc_vcc.physics.simulate import VCCSimulator, simulate
 from pymc_vcc.physics.unit import load_unit
 
-T_WINDOW = (0.0, 1060.0)
+T_WINDOW = (0.0, CALIBRATION_SECONDS)
 
 _simulator: VCCSimulator | None = None
 _start_line: Any = None  # a multiprocessing Barrier shared by the sweep's workers

@@ -30,6 +30,7 @@ from pymc_vcc.execution.store import ResultRecord, ResultStore
 from pymc_vcc.inference.priors import check_prior_support, validate_bounds
 from pymc_vcc.inference.series import OutputData, prepare_observed
 from pymc_vcc.inference.simulator import Simulator, check_simulator, run_simulation
+from pymc_vcc.physics.inputs import CALIBRATION_SECONDS
 
 
 @dataclass(frozen=True)
@@ -120,7 +121,7 @@ def sobol_indices(
     outputs: Sequence[str],
     *,
     n_base: int = 1024,
-    window: tuple[float, float] | None = (20.0, 1060.0),
+    window: tuple[float, float] | None = (20.0, CALIBRATION_SECONDS),
     n_resamples: int = 100,
     run: RunOptions | None = None,
 ) -> xr.Dataset:

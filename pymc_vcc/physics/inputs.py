@@ -29,6 +29,9 @@ from pymc_vcc.physics.quantities import QUANTITY_OF_UNIT, time_unit_seconds, uni
 
 BUILTIN_PROFILE = "fig4_steps.csv"
 """File name of the built-in 2120 s step profile inside ``pymc_vcc/data``."""
+CALIBRATION_SECONDS = 1060.0
+"""The paper's calibration window, s: the first half of the built-in profile (the second half
+is held out for prediction)."""
 
 WINTER_PROFILE = "winter_day_steps.csv"
 """A winter day for the heat pump in ``pymc_vcc/data``: 2400 s of steps, outdoor -7 to 8 °C,

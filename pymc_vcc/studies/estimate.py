@@ -43,6 +43,7 @@ from pymc_vcc.inference.pymc.smc import check_kernel, check_max_steps, sample_sm
 from pymc_vcc.inference.regression import ROUNDS, check_draws, regression_abc
 from pymc_vcc.inference.samplers import SAMPLERS, SmcKernel
 from pymc_vcc.inference.sequential import SequentialResult, sequential_calibration
+from pymc_vcc.physics.inputs import CALIBRATION_SECONDS
 from pymc_vcc.physics.integration.solver import DIFFERENCING_TOLERANCE_SCALE, get_solver
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
@@ -375,7 +376,7 @@ def estimation_study(
     *,
     unit: Unit | None = None,
     inputs: xr.Dataset | None = None,
-    t_calibration: float = 1060.0,
+    t_calibration: float = CALIBRATION_SECONDS,
     noise_bounds: tuple[float, float] = (0.0, 0.01),
     max_attempts: int = 5,
     method: str = "rejection",

@@ -20,6 +20,7 @@ import xarray as xr
 
 from pymc_vcc.inference.identifiability import Identifiability, identifiability
 from pymc_vcc.inference.noise import SensorNoise
+from pymc_vcc.physics.inputs import CALIBRATION_SECONDS
 from pymc_vcc.physics.integration.solver import DIFFERENCING_TOLERANCE_SCALE, get_solver
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
@@ -83,7 +84,7 @@ def identify_study(
     inputs: xr.Dataset | None = None,
     parameters: Sequence[str] | None = None,
     at: Mapping[str, float] | None = None,
-    t_end: float = 1060.0,
+    t_end: float = CALIBRATION_SECONDS,
     step: float = 0.1,
     sensor_noise: SensorNoise | None = None,
     fit: Sequence[str] = (),

@@ -29,6 +29,7 @@ from pymc_vcc.inference.pymc.smc import sample_smc_abc
 from pymc_vcc.inference.reference_table import ReferenceTable, simulate_table, table_rejection
 from pymc_vcc.inference.rejection import abc_rejection
 from pymc_vcc.inference.samplers import SAMPLERS, Sampler
+from pymc_vcc.physics.inputs import CALIBRATION_SECONDS
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_charge_posteriors, save_figure
@@ -230,7 +231,7 @@ def leak_study(
     sampler: Sampler = "rejection",
     unit: Unit | None = None,
     inputs: xr.Dataset | None = None,
-    t_calibration: float = 1060.0,
+    t_calibration: float = CALIBRATION_SECONDS,
     alarm_fraction: float = 0.9,
     smc_epsilon: float = 0.02,
     sensor_noise: SensorNoise | None = None,

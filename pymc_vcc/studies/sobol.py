@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import xarray as xr
 
 from pymc_vcc.inference.sensitivity import sobol_indices
+from pymc_vcc.physics.inputs import CALIBRATION_SECONDS
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.plots import plot_sobol_heatmap, save_figure
@@ -58,7 +59,7 @@ def sobol_study(
     *,
     unit: Unit | None = None,
     inputs: xr.Dataset | None = None,
-    window: tuple[float, float] = (20.0, 1060.0),
+    window: tuple[float, float] = (20.0, CALIBRATION_SECONDS),
 ) -> SobolResult:
     """First- and total-order Sobol indices of the nine outputs' averages over ``window`` (s).
 

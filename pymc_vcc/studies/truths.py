@@ -34,7 +34,7 @@ import xarray as xr
 
 from pymc_vcc.inference.error_model import SensorAccuracy, lagged
 from pymc_vcc.inference.noise import SensorNoise
-from pymc_vcc.physics.inputs import builtin_inputs, window
+from pymc_vcc.physics.inputs import CALIBRATION_SECONDS, builtin_inputs, window
 from pymc_vcc.physics.integration.solver import Solver
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
@@ -53,7 +53,7 @@ WEARING: tuple[str, ...] = ("HTC_CA", "HTC_EA", "FO_FLOW", "FI_FLOW", "CF_LEV", 
 """The parameters a unit's use moves between two records: the coils' air sides (fouling), the
 fans' flows (filters, belts), the valve's and the compressor's flow factors (wear)."""
 SETTLE = 600.0  # s at the first inputs before the record starts
-RECORD_SECONDS = 1060.0
+RECORD_SECONDS = CALIBRATION_SECONDS
 """Length of a generated record, s: the paper's calibration window of the built-in profile."""
 ACCURACY = SensorAccuracy()
 """Bounds of the sensors' constant errors and of the inputs' logging errors: the typical

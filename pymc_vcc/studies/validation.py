@@ -39,6 +39,7 @@ from pymc_vcc.inference.distances import (
 )
 from pymc_vcc.inference.noise import SensorNoise
 from pymc_vcc.inference.priors import UniformPrior
+from pymc_vcc.physics.inputs import CALIBRATION_SECONDS
 from pymc_vcc.physics.simulate import VCCSimulator
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
@@ -117,7 +118,7 @@ def validation_study(
     sensor_noise: SensorNoise | None = None,
     unit: Unit | None = None,
     inputs: xr.Dataset | None = None,
-    t_calibration: float = 1060.0,
+    t_calibration: float = CALIBRATION_SECONDS,
     smc_epsilon: float = 0.02,
     reference_table: bool = False,
     smc_draws: int | None = None,
