@@ -160,12 +160,17 @@ def _pairs(rows: list[dict]) -> str:
         "no response | median severity error | covered |",
         "|---|" + "---:|" * 8,
     ]
-    for case in CASES:
-        mine = [r for r in rows if r["case"] == case_label(case)]
-        if not mine or not isinstance(case[0], tuple):
+    pairs = [case for case in CASES if isinstance(case[0], tuple)]
+    groups = [
+        (_case_name(case_label(case)), [r for r in rows if r["case"] == case_label(case)])
+        for case in pairs
+    ]
+    groups.append(("**all**", [r for r in rows if isinstance(r["fault"], list)]))
+    for name, mine in groups:
+        if not mine:
             continue
         reads = [read for r in mine for read in r["faults_read"].values()]
-        cells = [_case_name(case_label(case)), str(len(mine))]
+        cells = [name, str(len(mine))]
         cells += [str(sum(r["score"] == s for r in mine)) for s in (*scores, "no response")]
         cells.append(f"{statistics.median(read['severity_error'] for read in reads):.2f}")
         cells.append(f"{sum(read['covered'] for read in reads)}/{len(reads)}")
@@ -192,10 +197,13 @@ def _trade_off(rows: list[dict]) -> str:
 
 def main(paths: list[str]) -> None:
     rows = [json.loads(line) for path in paths for line in Path(path).read_text().splitlines()]
-    tables = [_summary(rows), _by_size(rows), _by_case(rows)]
-    if any(isinstance(r["fault"], list) for r in rows):
+    single = [r for r in rows if not isinstance(r["fault"], list)]
+    tables = [_summary(rows), _by_size(rows), _by_case(rows)] if single else []
+    if len(single) < len(rows):
         tables.append(_pairs(rows))
-    tables += [_failures(rows), _trade_off(rows)]
+    tables.append(_failures(rows))
+    if single:
+        tables.append(_trade_off(rows))
     print(*tables, sep="\n\n")
 
 
