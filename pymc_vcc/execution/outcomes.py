@@ -25,6 +25,14 @@ from pymc_vcc.physics.failures import FailureKind
 
 OK = "ok"
 
+
+def finished(run: object) -> bool:
+    """Whether an executor's result is a run that reached its end: neither a
+    :class:`~pymc_vcc.execution.executors.WorkerCrash` nor a run whose ``status`` reports a
+    failure."""
+    return not isinstance(run, WorkerCrash) and run.attrs["status"] == OK  # type: ignore[attr-defined]
+
+
 _MAX_REASON_LENGTH = 300
 
 

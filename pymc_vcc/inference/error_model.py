@@ -39,7 +39,7 @@ from scipy.signal import lfilter
 from sklearn.covariance import ShrunkCovariance
 from sklearn.model_selection import GridSearchCV
 
-from pymc_vcc.execution.executors import Executor
+from pymc_vcc.execution.executors import Executor, WorkerCrash
 
 PLATEAU_SKIP = 60.0
 """Seconds after an input step before its plateau starts (sensor lags and fast transients)."""
@@ -244,11 +244,14 @@ def model_errors[T](
     """The unit − model summaries of each draw, None where a simulation failed.
 
     ``pair(draw)`` returns the (outputs, time) series of the unit and of the model for one
-    draw, or None when either simulation failed; it runs on the executor's workers.
+    draw, or None when either simulation failed; it runs on the executor's workers (a draw
+    whose run killed its worker is None too).
     """
     runs = executor.map(pair, list(draws))
     return [
-        None if run is None else summarise(run[0], windows) - summarise(run[1], windows)
+        None
+        if run is None or isinstance(run, WorkerCrash)
+        else summarise(run[0], windows) - summarise(run[1], windows)
         for run in runs
     ]
 

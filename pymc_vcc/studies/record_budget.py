@@ -18,6 +18,7 @@ import xarray as xr
 from scipy.special import expit, logit
 
 from pymc_vcc.execution.executors import Executor
+from pymc_vcc.execution.outcomes import finished
 from pymc_vcc.inference.error_model import (
     ErrorBudget,
     SensorAccuracy,
@@ -108,9 +109,7 @@ def coil_offset(
     fine, nominal = _unit_runs(model, fine_unit), _unit_runs(model, model.unit)
     tasks = [(fine, float(c)) for c in charges] + [(nominal, float(c)) for c in grid]
     runs = executor.map(_run_at_charge, tasks)
-    summaries = [
-        None if run.attrs["status"] != "ok" else summarise(_series(run), windows) for run in runs
-    ]
+    summaries = [summarise(_series(run), windows) if finished(run) else None for run in runs]
     targets, candidates = summaries[: charges.size], summaries[charges.size :]
     usable = np.array([s is not None for s in candidates])
     model_grid = grid[usable]
@@ -123,17 +122,27 @@ def coil_offset(
         best = int(np.argmin(misfit))
         if best in (0, model_grid.size - 1):
             continue
-        left, mid, right = misfit[best - 1 : best + 2]
-        curvature = left - 2 * mid + right
-        step = 0.5 * (left - right) / curvature if curvature > 0 else 0.0
         measured.append(charge)
-        offsets.append(model_grid[best] + step * COIL_OFFSET_STEP - charge)
+        offsets.append(
+            _least(model_grid[best - 1 : best + 2], misfit[best - 1 : best + 2]) - charge
+        )
     if not measured:
         raise RuntimeError(
             "the model reproduced the finer unit at none of the charges tried: no coil "
             "offset can be measured on this record"
         )
     return CoilOffset(np.array(measured), np.array(offsets)), len(tasks)
+
+
+def _least(x: np.ndarray, y: np.ndarray) -> float:
+    """Where the parabola through three points (``x`` increasing, ``y[1]`` the least) is
+    least: the grid's spacing may be uneven where a run failed."""
+    (x0, x1, x2), (y0, y1, y2) = x, y
+    a, b = (x1 - x0) * (y1 - y2), (x1 - x2) * (y1 - y0)
+    denominator = a - b
+    if denominator == 0.0:
+        return float(x1)
+    return float(x1 - 0.5 * ((x1 - x0) * a - (x1 - x2) * b) / denominator)
 
 
 def _unit_runs(model: VCCSimulator, unit: Unit, inputs: xr.Dataset | None = None) -> VCCSimulator:
@@ -188,7 +197,7 @@ class ErrorPair:
             if self.offset is not None:
                 fine_parameters[CHARGE] -= float(self.offset(true_parameters[CHARGE]))
             runs.append(_unit_runs(self.model, self.fine_unit, logged)(fine_parameters))
-        if any(run.attrs["status"] != "ok" for run in runs):
+        if not all(finished(run) for run in runs):
             return None
         coarse, model, *fine = (
             np.stack([run[name].sel(time=self.times).values for name in self.model.output_names])
@@ -424,7 +433,7 @@ def _jacobian(
     runs = executor.map(
         _run, [(model, dict(zip(names, map(float, p), strict=True))) for p in points]
     )
-    if any(run.attrs["status"] != "ok" for run in runs):
+    if not all(finished(run) for run in runs):
         raise RuntimeError("the model failed at the commissioning posterior's mean")
     summaries = np.array([summarise(_series(run), windows) for run in runs])
     return ((summaries[1:] - summaries[0]) / steps[:, None]).T

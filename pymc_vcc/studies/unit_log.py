@@ -35,6 +35,7 @@ from scipy.special import expit, logit
 
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.execution.options import RunOptions
+from pymc_vcc.execution.outcomes import finished
 from pymc_vcc.inference.error_model import (
     ErrorBudget,
     SensorAccuracy,
@@ -612,7 +613,7 @@ def _predictive_check(
     summaries = [
         summarise(np.stack([run[name].values for name in budget.outputs]), budget.windows)
         for run in runs
-        if run.attrs["status"] == "ok"
+        if finished(run)
     ]
     return predictive_check(budget, np.asarray(summaries)), len(thetas)
 

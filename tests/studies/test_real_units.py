@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import xarray as xr
 import pytest
 
 from pymc_vcc.cli import main
@@ -130,3 +131,45 @@ def test_finer_coils_read_as_the_model_at_a_higher_charge():
     unit_charges = constant.unit_charge(np.full(4000, 1.5), np.random.default_rng(0))
     assert unit_charges.min() >= 1.5 - 2 * 0.04 and unit_charges.max() <= 1.5
     assert unit_charges.mean() == pytest.approx(1.46, abs=0.003)  # continuum: twice the offset
+
+
+class _CrashingExecutor:
+    """Runs every item in turn, but every fourth (from the second) killed its worker."""
+
+    def map(self, fn, items):
+        from pymc_vcc.execution.executors import WorkerCrash
+
+        return [
+            WorkerCrash("worker process died (signal SIGKILL)") if k % 4 == 1 else fn(item)
+            for k, item in enumerate(items)
+        ]
+
+
+def test_runs_that_kill_their_worker_are_failures_not_fatal_to_the_error_budget(monkeypatch):
+    """The coil offset and the model's errors count a run whose worker died as a failed run: a
+    unit whose PD reads as the model's 0.05 kg heavier is measured so through the crashes."""
+    from pymc_vcc.inference.error_model import model_errors
+    from pymc_vcc.studies import record_budget
+
+    def run(task):
+        coils, charge = task
+        value = charge + (0.05 if coils == "fine" else 0.0)
+        return xr.Dataset({"PD": ("time", np.full(10, value))}, attrs={"status": "ok"})
+
+    monkeypatch.setattr(record_budget, "_unit_runs", lambda model, unit: unit)
+    monkeypatch.setattr(record_budget, "_run_at_charge", run)
+    model = type("Model", (), {"unit": "nominal"})()
+    windows = [np.arange(10)]
+    offset, n_runs = record_budget.coil_offset(
+        model, "fine", np.array([1.0]), windows, _CrashingExecutor(), (1.0, 2.0)
+    )
+    assert n_runs > 100 and offset.charges.size >= 4
+    assert np.allclose(offset.offsets, 0.05, atol=1e-6)
+
+    def pair(k):
+        series = np.full((1, 10), float(k))
+        return series + 1.0, series
+
+    errors = model_errors(pair, list(range(8)), windows, _CrashingExecutor())
+    assert [e is None for e in errors] == [k % 4 == 1 for k in range(8)]
+    assert all(np.allclose(e, 1.0) for e in errors if e is not None)
