@@ -3,8 +3,8 @@
 import json
 
 import numpy as np
-import xarray as xr
 import pytest
+import xarray as xr
 
 from pymc_vcc.cli import main
 from pymc_vcc.physics.inputs import builtin_inputs, input_segments, window
