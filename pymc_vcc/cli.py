@@ -206,8 +206,10 @@ def _validate(args: argparse.Namespace) -> int:
         if args.truth:
             raise ValueError("--faults names its own variant; give it without --truth")
         from pymc_vcc.studies.diagnose import ROUNDS
-        from pymc_vcc.studies.fault_benchmark import fault_benchmark
+        from pymc_vcc.studies.fault_benchmark import check_outputs, fault_benchmark
 
+        if args.outputs is not None:  # before the output folder is made
+            check_outputs(args.outputs)
         scored = fault_benchmark(
             _settings(args),
             args.faults,
@@ -216,6 +218,7 @@ def _validate(args: argparse.Namespace) -> int:
             method=args.method,
             later_seconds=args.later_seconds,
             later_start=args.later_start,
+            **({} if args.outputs is None else {"outputs": args.outputs}),
         )
         text = f"{scored.format_table()}\n\n{scored.wall_seconds:.0f} s"
         return _report(args, text, scored.summary())
@@ -559,6 +562,13 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         help="with --faults: where in the built-in profile each later record begins, s "
         f"(default {LATER_START:.0f}: at the commissioning's operating points; "
         f"{PROFILE_SECONDS - LATER_SECONDS:.0f}: at others, as on another day's weather)",
+    )
+    parser.add_argument(
+        "--outputs",
+        nargs="+",
+        metavar="ID",
+        help="with --faults: the outputs every record logs (default: the nine; a field unit "
+        "without a mass-flow meter: TD PD TS PS TC PC TE PE)",
     )
     parser.add_argument(
         "--alarm",

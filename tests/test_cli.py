@@ -197,3 +197,33 @@ def test_a_fault_benchmark_refuses_bad_rounds_or_sampler_before_any_simulation()
         fault_benchmark(StudySettings(), "all", 1, later_start=1500.0)
     with pytest.raises(ValueError, match=r"later_start = -1.0 s"):
         fault_benchmark(StudySettings(), "all", 1, later_start=-1.0)
+    with pytest.raises(ValueError, match=r"outputs \['MDOT', 'T_EVAP'\]: a record logs one or"):
+        fault_benchmark(StudySettings(), "all", 1, outputs=["MDOT", "T_EVAP"])
+    with pytest.raises(ValueError, match=r"outputs \[\]: a record logs one or more of \['TD'"):
+        fault_benchmark(StudySettings(), "all", 1, outputs=[])
+
+
+def test_the_fault_benchmark_logs_the_outputs_asked_and_refuses_others_in_one_line(
+    monkeypatch, tmp_path, capsys
+):
+    import pymc_vcc.cli as cli
+    from pymc_vcc.studies import fault_benchmark as benchmark
+
+    class Reached(Exception):
+        pass
+
+    def fault_benchmark(settings, variant, n_units, **options):
+        raise Reached(options)
+
+    field = ["TD", "PD", "TS", "PS", "TC", "PC", "TE", "PE"]
+    monkeypatch.setattr(benchmark, "fault_benchmark", fault_benchmark)
+    args = build_parser().parse_args(["validate", "--faults", "all", "--outputs", *field])
+    with pytest.raises(Reached) as reached:
+        cli._validate(args)
+    assert reached.value.args[0]["outputs"] == field
+    monkeypatch.undo()
+    out = tmp_path / "v"
+    code = main(["validate", "--faults", "all", "--outputs", "PD", "W", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code != 0 and len(err.splitlines()) == 1 and "outputs ['PD', 'W']" in err
+    assert not out.exists()

@@ -29,6 +29,7 @@ commissioning posterior kept beside it), so an interrupted run resumes where it 
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import statistics
@@ -40,6 +41,7 @@ import numpy as np
 import xarray as xr
 
 from pymc_vcc.execution.executors import Executor
+from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.inputs import builtin_inputs
 from pymc_vcc.physics.unit import load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
@@ -510,6 +512,7 @@ def fault_benchmark(
     method: str = "likelihood",
     later_seconds: float = LATER_SECONDS,
     later_start: float = LATER_START,
+    outputs: Sequence[str] = OUTPUT_IDS,
 ) -> FaultBenchmarkResult:
     """Run the benchmark (see the module docstring).
 
@@ -527,6 +530,9 @@ def fault_benchmark(
             commissioning record's operating points; 1060: at others, as on another day's
             weather); the record must end inside the profile. A resumed benchmark reuses only
             the rows of that start (older rows start at 0).
+        outputs: the outputs every record logs, commissioning and later (default: the nine;
+            a field unit without a mass-flow meter logs all but ``MDOT``); a resumed benchmark
+            reuses only the rows and commissionings of those outputs (older rows log the nine).
     """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
@@ -544,6 +550,7 @@ def fault_benchmark(
             f"later_start = {later_start} s: a later record of {later_seconds:.0f} s ends inside "
             f"the built-in profile, so it starts in [0, {PROFILE_SECONDS - later_seconds:.0f}] s"
         )
+    logged = check_outputs(outputs)
     known = {f.name for f in FAULTS}
     unknown = [name for case in cases for name in case_faults(case) if name not in known]
     if unknown:
@@ -557,6 +564,7 @@ def fault_benchmark(
         for line in log.read_text().splitlines():
             row = json.loads(line)
             same = row.get("rounds", rounds) == rounds and row.get("method", method) == method
+            same &= row.get("outputs", list(OUTPUT_IDS)) == logged
             # a row written before rows kept their window was the commissioning record's
             window = row.get("later_seconds", RECORD_SECONDS), row.get("later_start", LATER_START)
             if same and window == (later_seconds, later_start):
@@ -570,7 +578,7 @@ def fault_benchmark(
             runs += [done[key] for key in keys if key in done]
             if all(key in done for key in keys):
                 continue
-            healthy = benchmark_unit(variant, seed)
+            healthy = _logging(benchmark_unit(variant, seed), logged)
             commissioning = _commissioned(healthy, seed, executor, settings, budget, coils, log)
             for n, (case, key) in enumerate(zip(cases, keys, strict=True)):
                 if key in done:
@@ -578,7 +586,10 @@ def fault_benchmark(
                 case_started = time.perf_counter()
                 worn = worn_parameters(unit, healthy.parameters, np.random.default_rng([seed, n]))
                 parameters, truths = _faulted(unit, healthy.parameters, worn, case)
-                later = record_again(healthy, seed + n + 1, parameters, later_seconds, later_start)
+                later = _logging(
+                    record_again(healthy, seed + n + 1, parameters, later_seconds, later_start),
+                    logged,
+                )
                 diagnosis = diagnose(
                     later.observed,
                     later.inputs,
@@ -601,6 +612,7 @@ def fault_benchmark(
                     "method": method,
                     "later_seconds": later_seconds,
                     "later_start": later_start,
+                    "outputs": logged,
                     "seconds": time.perf_counter() - case_started,
                 }
                 if log is not None:
@@ -613,6 +625,22 @@ def fault_benchmark(
         write_json(settings.out / "summary.json", result.summary())
         write_text(settings.out / "table.txt", result.format_table() + "\n")
     return result
+
+
+def check_outputs(outputs: Sequence[str]) -> list[str]:
+    """The outputs a benchmark's records log, in the cycle's order; unknown or no outputs are
+    refused in one line."""
+    unknown = [name for name in outputs if name not in OUTPUT_IDS]
+    if unknown or not outputs:
+        raise ValueError(
+            f"outputs {list(outputs)}: a record logs one or more of {list(OUTPUT_IDS)}"
+        )
+    return [name for name in OUTPUT_IDS if name in outputs]
+
+
+def _logging(truth: Truth, outputs: list[str]) -> Truth:
+    """``truth`` with only ``outputs`` logged."""
+    return dataclasses.replace(truth, observed=truth.observed[outputs])
 
 
 def benchmark_unit(variant: str, seed: int) -> Truth:
@@ -654,6 +682,8 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.D
     from pymc_vcc.studies.common import write_netcdf
 
     unit = f"unit-{seed}-{healthy.variant}-{healthy.charge:.4f}kg-{budget}"
+    unlogged = [name for name in OUTPUT_IDS if name not in healthy.observed.data_vars]
+    unit += "-without-" + "-".join(unlogged) if unlogged else ""
     kept = None if log is None else log.with_name(f"{log.stem}-{unit}.nc")
     if kept is not None and kept.is_file():
         return xr.open_datatree(kept, engine="h5netcdf")
@@ -671,6 +701,7 @@ __all__ = [
     "benchmark_unit",
     "case_faults",
     "case_label",
+    "check_outputs",
     "commission",
     "correct_by_size",
     "fault_benchmark",

@@ -521,6 +521,8 @@ def test_a_resumed_fault_benchmark_reuses_only_the_rows_of_its_rounds_and_length
         benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, later_seconds=2120.0)
     with pytest.raises(Commissioning):  # a row written before rows kept their start began at 0
         benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, later_start=1060.0)
+    with pytest.raises(Commissioning):  # ... and logged the nine outputs, MDOT among them
+        benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, outputs=["PD", "PE"])
 
 
 def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
