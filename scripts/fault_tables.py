@@ -23,6 +23,7 @@ from pathlib import Path
 from pymc_vcc.studies.diagnose import NAMED
 from pymc_vcc.studies.fault_benchmark import (
     CASES,
+    PAIR_SCORES,
     case_label,
     correct_by_size,
     rescored,
@@ -154,7 +155,6 @@ def _reading(fault: str, read: dict) -> str:
 
 def _pairs(rows: list[dict]) -> str:
     """The cases of two faults at once: how often both, one or a wrong fault was named."""
-    scores = ("correct diagnosis", "partial diagnosis", "misdiagnosis", "missed detection")
     lines = [
         "| case | cases | both named | one of them alone | misdiagnosis | missed detection | "
         "no response | median severity error | covered |",
@@ -171,7 +171,7 @@ def _pairs(rows: list[dict]) -> str:
             continue
         reads = [read for r in mine for read in r["faults_read"].values()]
         cells = [name, str(len(mine))]
-        cells += [str(sum(r["score"] == s for r in mine)) for s in (*scores, "no response")]
+        cells += [str(sum(r["score"] == s for r in mine)) for s in PAIR_SCORES]
         cells.append(f"{statistics.median(read['severity_error'] for read in reads):.2f}")
         cells.append(f"{sum(read['covered'] for read in reads)}/{len(reads)}")
         lines.append("| " + " | ".join(cells) + " |")

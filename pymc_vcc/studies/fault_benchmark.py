@@ -122,6 +122,14 @@ SIZE_EDGES = (1.0, 1.75)
 diagnosis is scored apart (:func:`correct_by_size`): near the threshold (the benchmark's
 second severities and the condenser's first two cases, 1.1-1.6 times it) and well beyond it
 (its first severities, about twice or more)."""
+PAIR_SCORES = (
+    "correct diagnosis",
+    "partial diagnosis",
+    "misdiagnosis",
+    "missed detection",
+    "no response",
+)
+"""The categories of a case of two faults at once (:func:`score`)."""
 RUNS_CHECKPOINT = "validate-faults"
 _THRESHOLDS = {fault.name: fault.threshold for fault in FAULTS}  # by name, as rows name faults
 
@@ -176,15 +184,10 @@ class FaultBenchmarkResult:
 
 def _pairs_line(pairs: dict) -> str:
     """The score of two faults at once, as ``pymc-vcc validate --faults`` prints it."""
+    labels = ("both named", "one of them alone", *PAIR_SCORES[2:])
     shares = ", ".join(
         f"{label} {pairs[category]:.2f}"
-        for label, category in (
-            ("both named", "correct diagnosis"),
-            ("one of them alone", "partial diagnosis"),
-            ("misdiagnosis", "misdiagnosis"),
-            ("missed detection", "missed detection"),
-            ("no response", "no response"),
-        )
+        for label, category in zip(labels, PAIR_SCORES, strict=True)
     )
     return (
         f"two faults at once ({pairs['cases']} cases): {shares}; severity error (median) "
@@ -483,18 +486,11 @@ def _summarise_pairs(rows: Sequence[dict]) -> dict:
     """The score of the cases with two faults at once: each category's share, and of their
     faults' readings the median severity error and the share inside their 95 % intervals."""
     readings = [read for row in rows for read in row["faults_read"].values()]
-    categories = (
-        "correct diagnosis",
-        "partial diagnosis",
-        "misdiagnosis",
-        "missed detection",
-        "no response",
-    )
     return {
         "cases": len(rows),
         **{
             category: statistics.fmean(r["score"] == category for r in rows)
-            for category in categories
+            for category in PAIR_SCORES
         },
         "median_severity_error": statistics.median(r["severity_error"] for r in readings),
         "intensity_coverage": statistics.fmean(r["covered"] for r in readings),
@@ -696,6 +692,7 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.D
 
 __all__ = [
     "CASES",
+    "PAIR_SCORES",
     "SIZE_EDGES",
     "FaultBenchmarkResult",
     "benchmark_unit",
