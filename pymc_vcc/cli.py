@@ -543,7 +543,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         choices=list(VARIANTS),
         metavar="VARIANT",
         help="the fault benchmark instead: --datasets units of this truth variant, each "
-        "commissioned, then diagnosed with no fault and with each standard fault",
+        "commissioned, then diagnosed with no fault, with each standard fault and with two at once",
     )
     _add_rounds_option(parser, None)
     _add_record_method_option(parser)
