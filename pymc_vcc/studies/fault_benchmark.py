@@ -190,7 +190,8 @@ def _pairs_line(pairs: dict) -> str:
         for label, category in zip(labels, PAIR_SCORES, strict=True)
     )
     return (
-        f"two faults at once ({pairs['cases']} cases): {shares}; severity error (median) "
+        f"two faults at once ({pairs['cases']} case{'s' * (pairs['cases'] != 1)}): {shares}; "
+        "severity error (median) "
         f"{pairs['median_severity_error']:.2f}; intensities inside their 95 % intervals "
         f"{pairs['intensity_coverage']:.2f}"
     )

@@ -461,7 +461,7 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     pair = first.runs[2]  # two faults at once: each one's reading against its truth
     assert pair["faults_read"][leak]["true_intensity"] == pytest.approx(0.3)
     assert pair["faults_read"][gas]["true_intensity"] == 150e3
-    assert "two faults at once (1 cases)" in first.format_table()
+    assert "two faults at once (1 case): both named" in first.format_table()
     gas = first.runs[1]
     assert gas["true_intensity"] == 150e3 and gas["later_seconds"] == LATER_SECONDS
     assert gas["later_start"] == 0.0
