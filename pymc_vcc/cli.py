@@ -218,6 +218,7 @@ def _validate(args: argparse.Namespace) -> int:
             method=args.method,
             later_seconds=args.later_seconds,
             later_start=args.later_start,
+            commission_seconds=args.commission_seconds,
             **({} if args.outputs is None else {"outputs": args.outputs}),
         )
         text = f"{scored.format_table()}\n\n{scored.wall_seconds:.0f} s"
@@ -553,6 +554,13 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         default=LATER_SECONDS,
         help=f"with --faults: length of each later record, s (default {LATER_SECONDS:.0f}; at "
         f"most the built-in profile's {PROFILE_SECONDS:.0f})",
+    )
+    parser.add_argument(
+        "--commission-seconds",
+        type=_positive(float),
+        default=LATER_SECONDS,
+        help=f"with --faults: length of each unit's commissioning record, s (default "
+        f"{LATER_SECONDS:.0f}; at most {PROFILE_SECONDS:.0f})",
     )
     parser.add_argument(
         "--later-start",

@@ -152,6 +152,7 @@ def test_a_commissioning_is_calibrated_again_up_to_its_attempts(capsys):
             *(1, "rejection", 600, 0.0),
         ),
         (["--later-start", "1060"], None, "likelihood", None, 1060.0),
+        (["--commission-seconds", "2120"], None, "likelihood", None, 0.0),
     ],
 )
 def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
@@ -159,7 +160,7 @@ def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
 ):
     """``validate --faults`` diagnoses as ``diagnose`` does unless told otherwise: its rounds
     (:data:`ROUNDS`, not the real-units benchmark's one) and sampler reach every diagnosis, and
-    its later records are as long and start where asked."""
+    its records are as long and start where asked."""
     import pymc_vcc.cli as cli
     from pymc_vcc.studies import fault_benchmark as benchmark
     from pymc_vcc.studies.diagnose import ROUNDS
@@ -180,6 +181,7 @@ def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
         "method": method,
         "later_seconds": later_seconds,
         "later_start": start,
+        "commission_seconds": 2120.0 if "--commission-seconds" in options else 1060.0,
     }
 
 
@@ -193,6 +195,8 @@ def test_a_fault_benchmark_refuses_bad_rounds_or_sampler_before_any_simulation()
         fault_benchmark(StudySettings(), "all", 1, method="mcmc")
     with pytest.raises(ValueError, match=r"later_seconds = 3000.0 s: .* \(0, 2120\] s"):
         fault_benchmark(StudySettings(), "all", 1, later_seconds=3000.0)
+    with pytest.raises(ValueError, match=r"commission_seconds = 2200.0 s: .* \(0, 2120\] s"):
+        fault_benchmark(StudySettings(), "all", 1, commission_seconds=2200.0)
     with pytest.raises(ValueError, match=r"later_start = 1500.0 s: .* starts in \[0, 1060\] s"):
         fault_benchmark(StudySettings(), "all", 1, later_start=1500.0)
     with pytest.raises(ValueError, match=r"later_start = -1.0 s"):

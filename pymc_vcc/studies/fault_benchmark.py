@@ -510,6 +510,7 @@ def fault_benchmark(
     later_seconds: float = LATER_SECONDS,
     later_start: float = LATER_START,
     outputs: Sequence[str] = OUTPUT_IDS,
+    commission_seconds: float = RECORD_SECONDS,
 ) -> FaultBenchmarkResult:
     """Run the benchmark (see the module docstring).
 
@@ -530,6 +531,10 @@ def fault_benchmark(
         outputs: the outputs every record logs, commissioning and later (default: the nine;
             a field unit without a mass-flow meter logs all but ``MDOT``); a resumed benchmark
             reuses only the rows and commissionings of those outputs (older rows log the nine).
+        commission_seconds: length of the commissioning record, s, from the profile's start
+            (longer: the same unit, sensors and logger logged longer, new noise); a resumed
+            benchmark reuses only the rows and commissionings of that length (older rows are
+            1060 s).
     """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
@@ -537,11 +542,15 @@ def fault_benchmark(
         raise ValueError(f"n_units must be at least 1, got {n_units}")
     check_rounds(rounds)
     check_method(method)
-    if not 0.0 < later_seconds <= PROFILE_SECONDS:
-        raise ValueError(
-            f"later_seconds = {later_seconds} s: a later record lies in the built-in profile, "
-            f"(0, {PROFILE_SECONDS:.0f}] s"
-        )
+    for name, seconds in (
+        ("later_seconds", later_seconds),
+        ("commission_seconds", commission_seconds),
+    ):
+        if not 0.0 < seconds <= PROFILE_SECONDS:
+            raise ValueError(
+                f"{name} = {seconds} s: a record lies in the built-in profile, "
+                f"(0, {PROFILE_SECONDS:.0f}] s"
+            )
     if not 0.0 <= later_start <= PROFILE_SECONDS - later_seconds:
         raise ValueError(
             f"later_start = {later_start} s: a later record of {later_seconds:.0f} s ends inside "
@@ -562,6 +571,7 @@ def fault_benchmark(
             row = json.loads(line)
             same = row.get("rounds", rounds) == rounds and row.get("method", method) == method
             same &= row.get("outputs", list(OUTPUT_IDS)) == logged
+            same &= row.get("commission_seconds", RECORD_SECONDS) == commission_seconds
             # a row written before rows kept their window was the commissioning record's
             window = row.get("later_seconds", RECORD_SECONDS), row.get("later_start", LATER_START)
             if same and window == (later_seconds, later_start):
@@ -576,7 +586,8 @@ def fault_benchmark(
             if all(key in done for key in keys):
                 continue
             healthy = _logging(benchmark_unit(variant, seed), logged)
-            commissioning = _commissioned(healthy, seed, executor, settings, budget, coils, log)
+            record = _commissioning_record(healthy, seed, commission_seconds)
+            commissioning = _commissioned(record, seed, executor, settings, budget, coils, log)
             for n, (case, key) in enumerate(zip(cases, keys, strict=True)):
                 if key in done:
                     continue
@@ -610,6 +621,7 @@ def fault_benchmark(
                     "later_seconds": later_seconds,
                     "later_start": later_start,
                     "outputs": logged,
+                    "commission_seconds": commission_seconds,
                     "seconds": time.perf_counter() - case_started,
                 }
                 if log is not None:
@@ -638,6 +650,17 @@ def check_outputs(outputs: Sequence[str]) -> list[str]:
 def _logging(truth: Truth, outputs: list[str]) -> Truth:
     """``truth`` with only ``outputs`` logged."""
     return dataclasses.replace(truth, observed=truth.observed[outputs])
+
+
+def _commissioning_record(healthy: Truth, seed: int, seconds: float) -> Truth:
+    """The record a unit is commissioned on: ``healthy`` itself, or, ``seconds`` long, the
+    same unit logged longer from the profile's start, its noise drawn from ``seed`` and the
+    length."""
+    if seconds == float(healthy.observed["time"].values[-1]):
+        return healthy
+    noise = np.random.SeedSequence([seed, round(seconds)])
+    longer = record_again(healthy, noise, healthy.parameters, seconds)
+    return _logging(longer, list(healthy.observed.data_vars))
 
 
 def benchmark_unit(variant: str, seed: int) -> Truth:
@@ -681,6 +704,8 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.D
     unit = f"unit-{seed}-{healthy.variant}-{healthy.charge:.4f}kg-{budget}"
     unlogged = [name for name in OUTPUT_IDS if name not in healthy.observed.data_vars]
     unit += "-without-" + "-".join(unlogged) if unlogged else ""
+    seconds = float(healthy.observed["time"].values[-1])
+    unit += f"-{seconds:.0f}s" if seconds != RECORD_SECONDS else ""
     kept = None if log is None else log.with_name(f"{log.stem}-{unit}.nc")
     if kept is not None and kept.is_file():
         return xr.open_datatree(kept, engine="h5netcdf")

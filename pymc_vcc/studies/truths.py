@@ -122,7 +122,7 @@ def worn_parameters(
 
 def record_again(
     earlier: Truth,
-    seed: int,
+    seed: int | np.random.SeedSequence,
     parameters: Mapping[str, float],
     seconds: float | None = None,
     start: float = 0.0,

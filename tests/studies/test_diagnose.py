@@ -523,6 +523,37 @@ def test_a_resumed_fault_benchmark_reuses_only_the_rows_of_its_rounds_and_length
         benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, later_start=1060.0)
     with pytest.raises(Commissioning):  # ... and logged the nine outputs, MDOT among them
         benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, outputs=["PD", "PE"])
+    with pytest.raises(Commissioning):  # ... and was commissioned on 1060 s
+        benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, commission_seconds=2120.0)
+
+
+def test_a_longer_commissioning_logs_the_same_unit_longer_and_is_kept_apart(tmp_path):
+    """The commissioning record of ``commission_seconds``: the unit, its sensors and its logger
+    as in the healthy record, logged from the profile's start for longer, with new noise; its
+    posterior is kept under its own name, so a resumed run never takes another length's."""
+    import xarray as xr
+
+    from pymc_vcc.studies import StudySettings
+    from pymc_vcc.studies import fault_benchmark as benchmark
+    from pymc_vcc.studies.truths import RECORD_SECONDS
+
+    healthy = benchmark._logging(benchmark.benchmark_unit("all", 3), ["PD", "TE"])
+    assert benchmark._commissioning_record(healthy, 3, RECORD_SECONDS) is healthy
+    longer = benchmark._commissioning_record(healthy, 3, 1500.0)
+    assert float(longer.observed["time"].values[-1]) == 1500.0
+    assert list(longer.observed.data_vars) == ["PD", "TE"]
+    for kept in ("charge", "parameters", "n_volumes", "lags", "biases", "input_offsets"):
+        assert getattr(longer, kept) == getattr(healthy, kept), kept
+    first = longer.observed.sel(time=slice(None, RECORD_SECONDS))
+    difference = first["PD"].values - healthy.observed["PD"].values
+    assert 0 < np.abs(difference).max() < 0.1 * float(healthy.observed["PD"].mean())  # noise
+    log = tmp_path / "validate-faults.jsonl"
+    name = f"validate-faults-unit-3-all-{healthy.charge:.4f}kg-small-without-"
+    name += "-".join(n for n in benchmark.OUTPUT_IDS if n not in ("PD", "TE")) + "-1500s.nc"
+    xr.DataTree(xr.Dataset({"kept": 1.0})).to_netcdf(tmp_path / name, engine="h5netcdf")
+    settings = StudySettings()
+    tree = benchmark._commissioned(longer, 3, None, settings, "small", "finer", log)
+    assert float(tree["kept"]) == 1.0
 
 
 def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
