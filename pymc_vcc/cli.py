@@ -526,7 +526,7 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
     from pymc_vcc.studies.validation import METHODS
 
     parser.add_argument("--reference", type=float, default=1.5, metavar="KG", help="true charge")
-    from pymc_vcc.studies.truths import VARIANTS
+    from pymc_vcc.studies.truths import RECORD_SECONDS, VARIANTS
 
     parser.add_argument(
         "--datasets", type=_positive(int), default=20, help="datasets per case (default 20)"
@@ -558,9 +558,9 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--commission-seconds",
         type=_positive(float),
-        default=LATER_SECONDS,
+        default=RECORD_SECONDS,
         help=f"with --faults: length of each unit's commissioning record, s (default "
-        f"{LATER_SECONDS:.0f}; at most {PROFILE_SECONDS:.0f})",
+        f"{RECORD_SECONDS:.0f}; at most {PROFILE_SECONDS:.0f})",
     )
     parser.add_argument(
         "--later-start",
