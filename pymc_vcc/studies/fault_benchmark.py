@@ -656,7 +656,7 @@ def _commissioning_record(healthy: Truth, seed: int, seconds: float) -> Truth:
     """The record a unit is commissioned on: ``healthy`` itself, or, ``seconds`` long, the
     same unit logged longer from the profile's start, its noise drawn from ``seed`` and the
     length."""
-    if seconds == float(healthy.observed["time"].values[-1]):
+    if seconds == healthy.seconds:
         return healthy
     noise = np.random.SeedSequence([seed, round(seconds)])
     longer = record_again(healthy, noise, healthy.parameters, seconds)
@@ -704,8 +704,7 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.D
     unit = f"unit-{seed}-{healthy.variant}-{healthy.charge:.4f}kg-{budget}"
     unlogged = [name for name in OUTPUT_IDS if name not in healthy.observed.data_vars]
     unit += "-without-" + "-".join(unlogged) if unlogged else ""
-    seconds = float(healthy.observed["time"].values[-1])
-    unit += f"-{seconds:.0f}s" if seconds != RECORD_SECONDS else ""
+    unit += f"-{healthy.seconds:.0f}s" if healthy.seconds != RECORD_SECONDS else ""
     kept = None if log is None else log.with_name(f"{log.stem}-{unit}.nc")
     if kept is not None and kept.is_file():
         return xr.open_datatree(kept, engine="h5netcdf")

@@ -88,6 +88,11 @@ class Truth:
     biases: dict[str, float] = field(default_factory=dict)
     input_offsets: dict[str, float] = field(default_factory=dict)
 
+    @property
+    def seconds(self) -> float:
+        """Length of the record, s."""
+        return float(self.observed["time"].values[-1])
+
 
 def _uniform(rng: np.random.Generator, bound: float) -> float:
     return float(rng.uniform(-bound, bound))
@@ -132,7 +137,7 @@ def record_again(
     s on (0: the operating points ``earlier`` saw; later: others, as on another day's
     weather): its coils, sensors and logger as they were, its noise new (drawn from
     ``seed``)."""
-    length = float(earlier.observed["time"].values[-1]) if seconds is None else seconds
+    length = earlier.seconds if seconds is None else seconds
     return generate_truth(
         earlier.variant,
         seed,
