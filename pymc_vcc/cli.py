@@ -219,6 +219,7 @@ def _validate(args: argparse.Namespace) -> int:
             later_seconds=args.later_seconds,
             later_start=args.later_start,
             commission_seconds=args.commission_seconds,
+            commission_rounds=args.commission_rounds,
             **({} if args.outputs is None else {"outputs": args.outputs}),
         )
         text = f"{scored.format_table()}\n\n{scored.wall_seconds:.0f} s"
@@ -561,6 +562,13 @@ def _add_validate_options(parser: argparse.ArgumentParser) -> None:
         default=RECORD_SECONDS,
         help=f"with --faults: length of each unit's commissioning record, s (default "
         f"{RECORD_SECONDS:.0f}; at most {PROFILE_SECONDS:.0f})",
+    )
+    parser.add_argument(
+        "--commission-rounds",
+        type=_positive(int),
+        default=1,
+        help="with --faults: calibrations in turn at each unit's commissioning, as calibrate's "
+        "--rounds (default 1)",
     )
     parser.add_argument(
         "--later-start",

@@ -153,6 +153,7 @@ def test_a_commissioning_is_calibrated_again_up_to_its_attempts(capsys):
         ),
         (["--later-start", "1060"], None, "likelihood", None, 1060.0),
         (["--commission-seconds", "2120"], None, "likelihood", None, 0.0),
+        (["--commission-rounds", "2"], None, "likelihood", None, 0.0),
     ],
 )
 def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
@@ -182,6 +183,7 @@ def test_the_fault_benchmark_diagnoses_with_the_rounds_and_sampler_asked(
         "later_seconds": later_seconds,
         "later_start": start,
         "commission_seconds": 2120.0 if "--commission-seconds" in options else 1060.0,
+        "commission_rounds": 2 if "--commission-rounds" in options else 1,
     }
 
 
@@ -197,6 +199,8 @@ def test_a_fault_benchmark_refuses_bad_rounds_or_sampler_before_any_simulation()
         fault_benchmark(StudySettings(), "all", 1, later_seconds=3000.0)
     with pytest.raises(ValueError, match=r"commission_seconds = 2200.0 s: .* \(0, 2120\] s"):
         fault_benchmark(StudySettings(), "all", 1, commission_seconds=2200.0)
+    with pytest.raises(ValueError, match="rounds must be at least 1, got 0"):
+        fault_benchmark(StudySettings(), "all", 1, commission_rounds=0)
     with pytest.raises(ValueError, match=r"later_start = 1500.0 s: .* starts in \[0, 1060\] s"):
         fault_benchmark(StudySettings(), "all", 1, later_start=1500.0)
     with pytest.raises(ValueError, match=r"later_start = -1.0 s"):

@@ -511,6 +511,7 @@ def fault_benchmark(
     later_start: float = LATER_START,
     outputs: Sequence[str] = OUTPUT_IDS,
     commission_seconds: float = RECORD_SECONDS,
+    commission_rounds: int = 1,
 ) -> FaultBenchmarkResult:
     """Run the benchmark (see the module docstring).
 
@@ -535,12 +536,17 @@ def fault_benchmark(
             (longer: the same unit, sensors and logger logged longer, new noise); a resumed
             benchmark reuses only the rows and commissionings of that length (older rows are
             1060 s).
+        commission_rounds: calibrations in turn at commissioning (the ``rounds`` of
+            :func:`~pymc_vcc.studies.unit_log.calibrate_once`: after the first, the model
+            error drawn at the previous posterior); a resumed benchmark reuses only the rows
+            and commissionings of that many (older rows made one).
     """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
     if n_units < 1:
         raise ValueError(f"n_units must be at least 1, got {n_units}")
     check_rounds(rounds)
+    check_rounds(commission_rounds)
     check_method(method)
     for name, seconds in (
         ("later_seconds", later_seconds),
@@ -572,6 +578,7 @@ def fault_benchmark(
             same = row.get("rounds", rounds) == rounds and row.get("method", method) == method
             same &= row.get("outputs", list(OUTPUT_IDS)) == logged
             same &= row.get("commission_seconds", RECORD_SECONDS) == commission_seconds
+            same &= row.get("commission_rounds", 1) == commission_rounds
             # a row written before rows kept their window was the commissioning record's
             window = row.get("later_seconds", RECORD_SECONDS), row.get("later_start", LATER_START)
             if same and window == (later_seconds, later_start):
@@ -587,7 +594,9 @@ def fault_benchmark(
                 continue
             healthy = _logging(benchmark_unit(variant, seed), logged)
             record = _commissioning_record(healthy, seed, commission_seconds)
-            commissioning = _commissioned(record, seed, executor, settings, budget, coils, log)
+            commissioning = _commissioned(
+                record, seed, executor, settings, budget, coils, log, commission_rounds
+            )
             for n, (case, key) in enumerate(zip(cases, keys, strict=True)):
                 if key in done:
                     continue
@@ -622,6 +631,7 @@ def fault_benchmark(
                     "later_start": later_start,
                     "outputs": logged,
                     "commission_seconds": commission_seconds,
+                    "commission_rounds": commission_rounds,
                     "seconds": time.perf_counter() - case_started,
                 }
                 if log is not None:
@@ -677,12 +687,14 @@ def commission(
     seed: int = 0,
     solver: str = "cvode",
     coils: str = "finer",
+    rounds: int = 1,
 ) -> xr.DataTree:
     """The commissioning posterior of a unit's healthy record, calibrated as the benchmark does
     (:func:`~pymc_vcc.studies.unit_log.calibrate_record` at ``budget``'s particles and
-    model-error draws, :data:`~pymc_vcc.studies.unit_log.RECORD_BUDGETS`, calibrated again
-    while its predictive check fails, :data:`~pymc_vcc.studies.unit_log.COMMISSIONING_ATTEMPTS`
-    times at most; ``seed`` seeds it)."""
+    model-error draws, :data:`~pymc_vcc.studies.unit_log.RECORD_BUDGETS`, in ``rounds``
+    calibrations in turn, calibrated again while its predictive check fails,
+    :data:`~pymc_vcc.studies.unit_log.COMMISSIONING_ATTEMPTS` times at most; ``seed`` seeds
+    it)."""
     draws, error_draws = RECORD_BUDGETS[budget]
     return calibrate_record(
         healthy.observed,
@@ -694,10 +706,11 @@ def commission(
         solver=solver,
         coils=coils,
         attempts=COMMISSIONING_ATTEMPTS,
+        rounds=rounds,
     )
 
 
-def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.DataTree:
+def _commissioned(healthy, seed, executor, settings, budget, coils, log, rounds) -> xr.DataTree:
     """:func:`commission` of a unit, kept beside the checkpoint."""
     from pymc_vcc.studies.common import write_netcdf
 
@@ -705,11 +718,12 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log) -> xr.D
     unlogged = [name for name in OUTPUT_IDS if name not in healthy.observed.data_vars]
     unit += "-without-" + "-".join(unlogged) if unlogged else ""
     unit += f"-{healthy.seconds:.0f}s" if healthy.seconds != RECORD_SECONDS else ""
+    unit += f"-{rounds}rounds" if rounds != 1 else ""
     kept = None if log is None else log.with_name(f"{log.stem}-{unit}.nc")
     if kept is not None and kept.is_file():
         return xr.open_datatree(kept, engine="h5netcdf")
     solver = settings.solver or "cvode"
-    tree = commission(healthy, executor, budget, settings.seed, solver, coils)
+    tree = commission(healthy, executor, budget, settings.seed, solver, coils, rounds)
     if kept is not None:
         write_netcdf(tree, kept)
     return tree

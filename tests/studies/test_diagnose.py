@@ -525,12 +525,15 @@ def test_a_resumed_fault_benchmark_reuses_only_the_rows_of_its_rounds_and_length
         benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, outputs=["PD", "PE"])
     with pytest.raises(Commissioning):  # ... and was commissioned on 1060 s
         benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, commission_seconds=2120.0)
+    with pytest.raises(Commissioning):  # ... in one round
+        benchmark.fault_benchmark(settings, "all", 1, cases, rounds=1, commission_rounds=2)
 
 
 def test_a_longer_commissioning_logs_the_same_unit_longer_and_is_kept_apart(tmp_path):
     """The commissioning record of ``commission_seconds``: the unit, its sensors and its logger
     as in the healthy record, logged from the profile's start for longer, with new noise; its
-    posterior is kept under its own name, so a resumed run never takes another length's."""
+    posterior is kept under its own name (and its number of rounds), so a resumed run never
+    takes another length's or another number of rounds'."""
     import xarray as xr
 
     from pymc_vcc.studies import StudySettings
@@ -549,11 +552,14 @@ def test_a_longer_commissioning_logs_the_same_unit_longer_and_is_kept_apart(tmp_
     assert 0 < np.abs(difference).max() < 0.1 * float(healthy.observed["PD"].mean())  # noise
     log = tmp_path / "validate-faults.jsonl"
     name = f"validate-faults-unit-3-all-{healthy.charge:.4f}kg-small-without-"
-    name += "-".join(n for n in benchmark.OUTPUT_IDS if n not in ("PD", "TE")) + "-1500s.nc"
-    xr.DataTree(xr.Dataset({"kept": 1.0})).to_netcdf(tmp_path / name, engine="h5netcdf")
+    name += "-".join(n for n in benchmark.OUTPUT_IDS if n not in ("PD", "TE")) + "-1500s"
+    for rounds, suffix in ((1, ""), (2, "-2rounds")):
+        kept = xr.DataTree(xr.Dataset({"rounds": float(rounds)}))
+        kept.to_netcdf(tmp_path / f"{name}{suffix}.nc", engine="h5netcdf")
     settings = StudySettings()
-    tree = benchmark._commissioned(longer, 3, None, settings, "small", "finer", log)
-    assert float(tree["kept"]) == 1.0
+    for rounds in (1, 2):
+        tree = benchmark._commissioned(longer, 3, None, settings, "small", "finer", log, rounds)
+        assert float(tree["rounds"]) == rounds
 
 
 def test_a_case_moves_the_healthy_unit_and_knows_its_true_intensity():
