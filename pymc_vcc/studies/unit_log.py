@@ -272,11 +272,11 @@ def calibrate_once(
         seed: seeds every random draw.
         solver: ODE solver, a method name or a
             :class:`~pymc_vcc.physics.integration.solver.Solver`.
-        rounds: calibrations in turn, each after the first with the model error drawn at the
-            previous posterior's draws (local rather than over the whole prior; for a later
-            record half of them, half where the first round drew it); the rounds before the
-            last scout with :data:`SCOUTING_SHARE` of the particles and draws, their
-            posterior's quality not reported
+        rounds: calibrations in turn, each after the first with the model error drawn half at
+            the previous posterior's draws (local), half where the first round drew it (a first
+            record: over the whole prior; a later record: mostly the unit as commissioned);
+            the rounds before the last scout with :data:`SCOUTING_SHARE` of the particles and
+            draws, their posterior's quality not reported
             (:class:`~pymc_vcc.inference.pymc.smc.PosteriorQualityWarning`: the small
             budget's 48 scouting particles hold an ESS of 24 by design).
         progressbar: show PyMC's progress bar.
@@ -337,6 +337,8 @@ def calibrate_once(
     if error_prior is not None:
         thetas = error_prior.sample(error_draws, rng)
     error_thetas = thetas
+    if error_thetas is None and rounds > 1:  # a first record's later rounds: half over the box
+        error_thetas = prior.sample(error_draws, rng)
     if commissioning is not None:
         commissioned = _commissioning_record(commissioning, model)
     if CHARGE in prior.names and coils == "finer":
@@ -434,9 +436,9 @@ def _error_thetas(
     first: np.ndarray | None, previous: np.ndarray | None, n_draws: int, rng: np.random.Generator
 ) -> np.ndarray | None:
     """Where a round's model error is drawn: ``n_draws`` of the ``previous`` round's posterior
-    draws, half of them instead of the ``first`` round's draws when both are given (a later
-    record's second round: its error both at the unit as commissioned and where the first
-    round's posterior put it)."""
+    draws, half of them instead of the ``first`` round's draws when both are given (a second
+    round: its error both where the first round drew it and where the first round's posterior
+    put it)."""
     if previous is None:
         return None
     if first is None or first is previous:

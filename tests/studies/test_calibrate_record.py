@@ -188,7 +188,7 @@ def test_a_later_records_model_error_is_drawn_mostly_at_the_unit_as_commissioned
 def test_a_later_round_draws_half_its_model_error_where_the_first_round_did():
     """A later record's second round draws its model error half at the first round's draws
     (the unit as commissioned, mostly) and half at the first round's posterior; a first
-    record's rounds, and a first round, draw at one set alone."""
+    round draws at one set alone."""
     rng = np.random.default_rng(0)
     first, posterior = np.zeros((40, 3)), np.ones((30, 3))
     mixed = unit_log._error_thetas(first, posterior, 11, rng)
@@ -197,6 +197,44 @@ def test_a_later_round_draws_half_its_model_error_where_the_first_round_did():
     assert (unit_log._error_thetas(first, first, 11, rng) == 0).all()
     assert (unit_log._error_thetas(None, posterior, 11, rng) == 1).all()
     assert unit_log._error_thetas(first, None, 11, rng) is None
+
+
+def test_a_first_records_second_round_draws_half_its_model_error_over_the_box(truth, monkeypatch):
+    """A first record calibrated in two rounds: the first round's model error is drawn over
+    the prior (the budget draws it), the second's half at the first round's posterior and half
+    over the prior again (at the posterior alone, the budget was too narrow for the unit: every
+    such commissioning failed its predictive check)."""
+    from types import SimpleNamespace
+
+    from pymc_vcc.physics.unit import load_unit
+
+    drawn = []
+
+    def budget(model, observed, prior, executor, rng, *, thetas, **options):
+        drawn.append(thetas)
+        return SimpleNamespace(n_draws=12, n_failed=0, outputs=list(observed.data_vars))
+
+    def sample(method, model, observed, budget, prior, particles, *rest):
+        posterior = xr.Dataset({"M0": (("chain", "draw"), np.full((1, particles), 1.4))})
+        return xr.DataTree.from_dict({"posterior": posterior, "sample_stats": xr.Dataset()}), 0
+
+    def check(tree, model, budget, executor, rng):
+        return {name: dict.fromkeys(unit_log.PPC_KEYS, 0.0) for name in budget.outputs}, 0
+
+    monkeypatch.setattr(unit_log, "error_budget", budget)
+    monkeypatch.setattr(unit_log, "_sample", sample)
+    monkeypatch.setattr(unit_log, "_predictive_check", check)
+    prior = unit_log.box_prior(load_unit(), ["M0"])
+    calibrate_record(
+        truth.observed, truth.inputs, None, prior=prior, draws=96, error_draws=40, rounds=2,
+        coils="model", method="rejection",
+    )  # fmt: skip
+    assert drawn[0] is None  # over the prior, by the budget
+    second = drawn[1][:, 0]
+    assert len(second) == 40 and (second == 1.4).sum() == 20
+    low, high = prior.bounds["M0"]
+    box = second[second != 1.4]
+    assert ((low <= box) & (box <= high)).all() and box.std() > 0.2 * (high - low)
 
 
 def test_only_the_last_rounds_posterior_quality_is_reported(truth, monkeypatch):
