@@ -425,9 +425,9 @@ def _add_rounds_option(parser: argparse.ArgumentParser, default: int | None = 1)
         "--rounds",
         type=_positive(int),
         default=default,
-        help="calibrations in turn, each after the first with the model error drawn at the "
-        "previous posterior (with --prior: half of it, half as the first round's), within the "
-        f"same cap on simulations (default {said})",
+        help="calibrations in turn, each after the first with half of the model error drawn at "
+        "the previous posterior and half where the first round drew it, within the same cap on "
+        f"simulations (default {said})",
     )
 
 
