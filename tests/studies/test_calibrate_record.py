@@ -199,6 +199,27 @@ def test_a_later_round_draws_half_its_model_error_where_the_first_round_did():
     assert unit_log._error_thetas(first, None, 11, rng) is None
 
 
+ROUND_CHARGE = 1.4  # kg: every draw of the stand-in rounds' posteriors
+
+
+def _stand_in_rounds(monkeypatch, budget, warn=None):
+    """Calibrations whose error budget is ``budget``, whose sampler returns a posterior of
+    ``ROUND_CHARGE`` alone (calling ``warn(particles)`` first) and whose check passes."""
+
+    def sample(method, model, observed, budget, prior, particles, *rest):
+        if warn is not None:
+            warn(particles)
+        posterior = xr.Dataset({"M0": (("chain", "draw"), np.full((1, particles), ROUND_CHARGE))})
+        return xr.DataTree.from_dict({"posterior": posterior, "sample_stats": xr.Dataset()}), 0
+
+    def check(tree, model, budget, executor, rng):
+        return {name: dict.fromkeys(unit_log.PPC_KEYS, 0.0) for name in budget.outputs}, 0
+
+    monkeypatch.setattr(unit_log, "error_budget", budget)
+    monkeypatch.setattr(unit_log, "_sample", sample)
+    monkeypatch.setattr(unit_log, "_predictive_check", check)
+
+
 def test_a_first_records_second_round_draws_half_its_model_error_over_the_box(truth, monkeypatch):
     """A first record calibrated in two rounds: the first round's model error is drawn over
     the prior (the budget draws it), the second's half at the first round's posterior and half
@@ -214,16 +235,7 @@ def test_a_first_records_second_round_draws_half_its_model_error_over_the_box(tr
         drawn.append(thetas)
         return SimpleNamespace(n_draws=12, n_failed=0, outputs=list(observed.data_vars))
 
-    def sample(method, model, observed, budget, prior, particles, *rest):
-        posterior = xr.Dataset({"M0": (("chain", "draw"), np.full((1, particles), 1.4))})
-        return xr.DataTree.from_dict({"posterior": posterior, "sample_stats": xr.Dataset()}), 0
-
-    def check(tree, model, budget, executor, rng):
-        return {name: dict.fromkeys(unit_log.PPC_KEYS, 0.0) for name in budget.outputs}, 0
-
-    monkeypatch.setattr(unit_log, "error_budget", budget)
-    monkeypatch.setattr(unit_log, "_sample", sample)
-    monkeypatch.setattr(unit_log, "_predictive_check", check)
+    _stand_in_rounds(monkeypatch, budget)
     prior = unit_log.box_prior(load_unit(), ["M0"])
     calibrate_record(
         truth.observed, truth.inputs, None, prior=prior, draws=96, error_draws=40, rounds=2,
@@ -231,9 +243,9 @@ def test_a_first_records_second_round_draws_half_its_model_error_over_the_box(tr
     )  # fmt: skip
     assert drawn[0] is None  # over the prior, by the budget
     second = drawn[1][:, 0]
-    assert len(second) == 40 and (second == 1.4).sum() == 20
+    assert len(second) == 40 and (second == ROUND_CHARGE).sum() == 20
     low, high = prior.bounds["M0"]
-    box = second[second != 1.4]
+    box = second[second != ROUND_CHARGE]
     assert ((low <= box) & (box <= high)).all() and box.std() > 0.2 * (high - low)
 
 
@@ -249,18 +261,11 @@ def test_only_the_last_rounds_posterior_quality_is_reported(truth, monkeypatch):
     def budget(model, observed, prior, executor, rng, **options):
         return SimpleNamespace(n_draws=12, n_failed=0, outputs=list(observed.data_vars))
 
-    def sample(method, model, observed, budget, prior, particles, *rest):
+    def warn(particles):
         warnings.warn(f"{particles} particles: few", PosteriorQualityWarning, stacklevel=2)
         warnings.warn(f"{particles} particles: other", UserWarning, stacklevel=2)
-        posterior = xr.Dataset({"M0": (("chain", "draw"), np.full((1, particles), 1.4))})
-        return xr.DataTree.from_dict({"posterior": posterior, "sample_stats": xr.Dataset()}), 0
 
-    def check(tree, model, budget, executor, rng):
-        return {name: dict.fromkeys(unit_log.PPC_KEYS, 0.0) for name in budget.outputs}, 0
-
-    monkeypatch.setattr(unit_log, "error_budget", budget)
-    monkeypatch.setattr(unit_log, "_sample", sample)
-    monkeypatch.setattr(unit_log, "_predictive_check", check)
+    _stand_in_rounds(monkeypatch, budget, warn)
     prior = unit_log.box_prior(load_unit(), ["M0"])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
