@@ -537,9 +537,8 @@ def fault_benchmark(
             benchmark reuses only the rows and commissionings of that length (older rows are
             1060 s).
         commission_rounds: calibrations in turn at commissioning (the ``rounds`` of
-            :func:`~pymc_vcc.studies.unit_log.calibrate_once`: after the first, the model
-            error drawn at the previous posterior); a resumed benchmark reuses only the rows
-            and commissionings of that many (older rows made one).
+            :func:`~pymc_vcc.studies.unit_log.calibrate_once`); a resumed benchmark reuses
+            only the rows and commissionings of that many (older rows made one).
     """
     if variant not in VARIANTS:
         raise ValueError(f"unknown truth variant {variant!r}; allowed are {list(VARIANTS)}")
