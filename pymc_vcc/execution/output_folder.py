@@ -5,7 +5,8 @@ file ``.pymc-vcc.lock`` holding the owner's pid, host and start time, locked wit
 that the operating system releases it when its process dies, however it dies. A second run on
 the same folder is refused at once, naming the run that holds it; a lock file left by a run
 that died is taken over with a message. Creating the lock file also proves, before any
-simulation, that the folder is writable.
+simulation, that the folder is writable. A folder the claim created is removed again if the run
+wrote no file into it (it stopped at a bad option or input): a failed command leaves nothing.
 
 :func:`atomic_path` gives a temporary name in the destination's folder and renames it over the
 destination only once the file is complete, so a kill while writing never leaves a truncated
@@ -17,6 +18,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import shutil
 import socket
 import sys
 import uuid
@@ -51,7 +53,8 @@ def _read_owner(handle) -> dict:
 
 @contextmanager
 def claim_output_folder(folder: str | Path) -> Iterator[Path]:
-    """Hold ``folder`` (created if missing) for this run; reentrant within a process.
+    """Hold ``folder`` (created if missing, removed again if the run wrote no file into it)
+    for this run; reentrant within a process.
 
     Raises:
         OutputFolderError: the folder cannot be created or written, or another live run holds it.
@@ -64,6 +67,7 @@ def claim_output_folder(folder: str | Path) -> Iterator[Path]:
         finally:
             _HELD[folder] -= 1
         return
+    created = [path for path in (folder, *folder.parents) if not path.exists()]
     try:
         folder.mkdir(parents=True, exist_ok=True)
         handle = open(folder / LOCK_NAME, "a+")  # noqa: SIM115 -- held open for the whole run
@@ -106,8 +110,20 @@ def claim_output_folder(folder: str | Path) -> Iterator[Path]:
             handle.seek(0)
             handle.truncate()  # empty, not removed: a waiting opener must not lock a stale inode
             handle.flush()
+            if created and _holds_no_file(folder):  # made by this run, and left unused
+                shutil.rmtree(folder)
+                for path in created[1:]:  # the parents it made, while nothing else is in them
+                    if any(path.iterdir()):
+                        break
+                    path.rmdir()
     finally:
         handle.close()  # releases the flock
+
+
+def _holds_no_file(folder: Path) -> bool:
+    """Whether ``folder`` holds no file but its lock (empty folders aside)."""
+    files = (path for path in folder.rglob("*") if not path.is_dir())
+    return all(path == folder / LOCK_NAME for path in files)
 
 
 @contextmanager

@@ -84,6 +84,28 @@ def test_an_unwritable_folder_is_refused_before_any_simulation(tmp_path, capsys)
     assert status == 2 and error.count("\n") == 0 and "is not writable" in error
 
 
+def test_a_run_that_wrote_nothing_leaves_no_folder_it_made(tmp_path, capsys):
+    """A command stopped by a bad option leaves no empty output folder (nor the parents it
+    made); a folder that was there, or that the run wrote a file into, stays."""
+    new = tmp_path / "a" / "b" / "out"
+    with pytest.raises(ValueError), claim_output_folder(new):
+        (new / "checkpoints").mkdir()
+        raise ValueError("a bad option")
+    assert list(tmp_path.iterdir()) == []
+    with claim_output_folder(new):
+        (new / "summary.json").write_text("{}")
+    assert (new / "summary.json").is_file()
+    there = tmp_path / "there"
+    there.mkdir()
+    with claim_output_folder(there):
+        pass
+    assert there.is_dir()
+    status = main(["validate", "--faults", "all", "--later-start", "99999", "--out",
+                   str(tmp_path / "cli")])  # fmt: skip
+    assert status == 2 and "later_start" in capsys.readouterr().err
+    assert not (tmp_path / "cli").exists()
+
+
 def test_an_interrupted_write_leaves_the_previous_file_whole(tmp_path):
     target = tmp_path / "summary.json"
     target.write_text('{"good": true}')
