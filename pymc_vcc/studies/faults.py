@@ -353,6 +353,8 @@ __all__ = [
     "FAULTS",
     "FAULT_PROBABILITY",
     "MODEL_FORM",
+    "STEADY_JITTERS",
+    "STEADY_SAMPLES_PER_TERM",
     "Fault",
     "beyond_probability",
     "check_fault_probability",
