@@ -353,8 +353,6 @@ __all__ = [
     "FAULTS",
     "FAULT_PROBABILITY",
     "MODEL_FORM",
-    "STEADY_JITTERS",
-    "STEADY_SAMPLES_PER_TERM",
     "Fault",
     "beyond_probability",
     "check_fault_probability",
