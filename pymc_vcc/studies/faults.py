@@ -20,7 +20,7 @@ from typing import Literal
 
 import numpy as np
 import xarray as xr
-from scipy.special import logit, ndtr
+from scipy.special import ndtr
 
 from pymc_vcc.physics.cycles.split_unit import air_conductance
 from pymc_vcc.physics.unit import Unit
@@ -53,26 +53,6 @@ class Fault:
     display: tuple[str, float] = ("%", 100.0)
     measure: Callable[[Unit, Mapping[str, np.ndarray]], np.ndarray] | None = None
 
-    def quantities(self, draws: Mapping[str, np.ndarray], unit: Unit | None = None) -> np.ndarray:
-        """What the fault's intensity compares, per draw: its :attr:`measure` (one row), or
-        each of its parameters (a row each).
-
-        Args:
-            draws: parameter -> values, one per draw.
-            unit: the unit, for a fault measured on a quantity derived from the parameters.
-        """
-        if self.measure is not None:
-            if unit is None:
-                raise ValueError(f"the intensity of {self.name!r} is measured on the unit")
-            return np.asarray(self.measure(unit, draws))[None, :]
-        return np.stack([np.asarray(draws[pid], dtype=float) for pid in self.parameters])
-
-    def change(self, now: np.ndarray, before: np.ndarray | None) -> np.ndarray:
-        """The intensity per draw from :meth:`quantities` now and at commissioning (None for a
-        fault that is not :attr:`relative`): the largest of the moves."""
-        moves = self.direction * (now if before is None else now / before - 1.0)
-        return np.max(moves, axis=0)
-
     def intensity(
         self,
         draws: Mapping[str, np.ndarray],
@@ -88,8 +68,18 @@ class Fault:
             unit: the unit, for a fault measured on a quantity derived from the parameters
                 (:attr:`measure`).
         """
-        before = self.quantities(commissioned, unit) if self.relative else None
-        return self.change(self.quantities(draws, unit), before)
+        if self.measure is not None:
+            if unit is None:
+                raise ValueError(f"the intensity of {self.name!r} is measured on the unit")
+            before = self.measure(unit, commissioned)
+            return self.direction * (self.measure(unit, draws) / before - 1.0)
+        moves = []
+        for pid in self.parameters:
+            if self.relative:
+                moves.append(self.direction * (draws[pid] / commissioned[pid] - 1.0))
+            else:
+                moves.append(self.direction * draws[pid])
+        return np.max(moves, axis=0)
 
 
 def coil_conductance(
@@ -238,115 +228,31 @@ def moved_parameters(unit: Unit) -> list[str]:
     ]
 
 
-STEADY_SAMPLES_PER_TERM = 10
-"""Fewest commissioning draws per term (the steady parameters and the intercept) of
-:func:`commissioned_given`'s regression; with fewer, the commissioned value is drawn from its
-marginal alone."""
-STEADY_JITTERS = 8
-"""Copies of the commissioning draws, each moved by a drift step, that
-:func:`commissioned_given` fits: its fit follows the later prior's step, not one draw of it."""
-
-
-def steady_parameters(unit: Unit, names: Sequence[str]) -> list[str]:
-    """Of ``names``, the calibration parameters no fault moves (the compressor's): the same
-    unit at commissioning and at a later record, but for the diagnosis's drift."""
-    moved = {pid for fault in FAULTS for pid in fault.parameters}
-    return [n for n in names if n in unit.parameters.ids and n not in moved]
-
-
-def commissioned_given(
-    fault: Fault,
-    later: Mapping[str, np.ndarray],
-    commissioning: Mapping[str, np.ndarray],
-    unit: Unit,
-    drift: float,
-    rng: np.random.Generator,
-) -> np.ndarray:
-    """A relative fault's commissioned :meth:`~Fault.quantities`, one per later draw, given the
-    later draw's steady parameters (:func:`steady_parameters`).
-
-    The later prior (:func:`~pymc_vcc.studies.unit_log.later_prior`) holds each steady
-    parameter within ``drift`` of the commissioned unit, and the commissioning data tie them
-    to what a fault moves (on a benchmark unit, the condenser's HTC correlates -1.0 with the
-    compressor's power factor): a later draw's steady parameters thus say where on the
-    commissioning posterior its unit was. The log of each quantity is regressed, over the
-    commissioning draws, on the logits (in the unit's bounds) of their steady parameters, each
-    moved by a drift step (:data:`STEADY_JITTERS` copies); the fit at a later draw's steady
-    parameters, plus a residual of the fit drawn at random, is its commissioned value. A draw
-    picked at random counts the commissioning's uncertainty along those directions twice.
-
-    Args:
-        fault: a relative fault.
-        later: parameter -> the later posterior's draws.
-        commissioning: parameter -> the commissioning posterior's draws.
-        unit: the unit.
-        drift: sd of a steady parameter's move since commissioning, a fraction of its range
-            (the later prior's).
-        rng: draws the steps and the residuals.
-    """
-    steady = steady_parameters(unit, [n for n in commissioning if n in later])
-    n_commissioning, n_later = len(commissioning[CHARGE]), len(later[CHARGE])
-    if n_commissioning < STEADY_SAMPLES_PER_TERM * (len(steady) + 1):
-        steady = []
-    specs = [unit.parameter_spec(pid) for pid in steady]
-    low = np.array([spec.low for spec in specs])
-    span = np.array([spec.high - spec.low for spec in specs])
-
-    def terms(draws: Mapping[str, np.ndarray], n: int) -> np.ndarray:
-        """(n, 1 + steady): 1 and each steady parameter's logit in its bounds."""
-        values = np.column_stack([draws[pid] for pid in steady]) if steady else np.empty((n, 0))
-        fraction = np.clip((values - low) / span, 1e-6, 1.0 - 1e-6)
-        return np.column_stack([np.ones(n), logit(fraction)])
-
-    rows = STEADY_JITTERS * n_commissioning
-    stepped = {
-        pid: np.tile(commissioning[pid], STEADY_JITTERS) + drift * width * rng.standard_normal(rows)
-        for pid, width in zip(steady, span, strict=True)
-    }
-    fitted_terms = terms(stepped, rows)
-    logs = np.tile(np.log(fault.quantities(commissioning, unit)), STEADY_JITTERS).T
-    coefficients, *_ = np.linalg.lstsq(fitted_terms, logs, rcond=None)
-    residuals = logs - fitted_terms @ coefficients
-    drawn = residuals[rng.integers(0, rows, n_later)]
-    return np.exp(terms(later, n_later) @ coefficients + drawn).T
-
-
 def fault_intensities(
     later: Mapping[str, np.ndarray],
     commissioning: xr.Dataset,
     unit: Unit,
     seed: int,
     faults: Sequence[Fault] = FAULTS,
-    drift: float | None = None,
 ) -> dict[str, np.ndarray]:
     """Each fault's intensity per draw of a later record's posterior.
 
     Args:
         later: parameter -> the later posterior's draws (the unit's charge in ``M0``).
-        commissioning: the commissioning posterior (its ``posterior`` group).
+        commissioning: the commissioning posterior (its ``posterior`` group); one of its draws,
+            picked at random (``seed``), is paired with each later draw.
         unit: the unit.
         seed: seeds the pairing.
         faults: the faults (default: the standard set).
-        drift: the later prior's drift (:func:`~pymc_vcc.studies.unit_log.later_prior`):
-            each later draw is paired with the commissioned value given its steady parameters
-            (:func:`commissioned_given`). None: with a commissioning draw picked at random.
     """
-    draws = {
-        str(pid): commissioning[pid].values.ravel()
+    n_commissioning = commissioning.sizes["chain"] * commissioning.sizes["draw"]
+    picks = np.random.default_rng(seed).integers(0, n_commissioning, len(later[CHARGE]))
+    paired = {
+        str(pid): commissioning[pid].values.ravel()[picks]
         for pid in commissioning.data_vars
         if pid in unit.parameters.ids
     }
-    rng = np.random.default_rng(seed)
-    picks = rng.integers(0, len(draws[CHARGE]), len(later[CHARGE]))
-    paired = {pid: values[picks] for pid, values in draws.items()}
-    read = {}
-    for fault in faults:
-        if drift is None or not fault.relative:
-            read[fault.name] = fault.intensity(later, paired, unit)
-        else:
-            before = commissioned_given(fault, later, draws, unit, drift, rng)
-            read[fault.name] = fault.change(fault.quantities(later, unit), before)
-    return read
+    return {fault.name: fault.intensity(later, paired, unit) for fault in faults}
 
 
 __all__ = [
@@ -358,9 +264,7 @@ __all__ = [
     "check_fault_probability",
     "check_model_form",
     "coil_conductance",
-    "commissioned_given",
     "fault_intensities",
     "moved_parameters",
-    "steady_parameters",
     "with_model_form",
 ]

@@ -127,35 +127,6 @@ def test_the_leak_alarm_is_the_undercharge_beyond_its_fraction_paired_with_commi
     assert alarm > 0.15
 
 
-def test_a_later_draw_is_paired_with_the_commissioned_charge_its_steady_parameters_imply():
-    """Commissioning pinned the charge only together with the compressor's power factor (a
-    ridge, the charge ±11 %); a later record pinned the same ridge 20 % lower. Paired given
-    each later draw's power factor (within the later prior's 3 % drift), the loss reads 20 %
-    to about the drift's width; paired at random, to the ridge's: three times wider. With a
-    power factor that tells nothing of the charge, or too few commissioning draws to fit, the
-    pairing is the random one's width."""
-    from pymc_vcc.physics.unit import load_unit
-    from pymc_vcc.studies.faults import fault_intensities
-
-    unit = load_unit()
-    under = next(f for f in FAULTS if f.name == "undercharge")
-    rng = np.random.default_rng(3)
-    power = rng.uniform(0.8, 1.2, 2000)
-    ridge = {"M0": 1.6 * power / power.mean(), "CF_POW": power}
-    later = {"M0": 0.8 * ridge["M0"], "CF_POW": power}
-    paired = fault_intensities(later, _posterior(ridge).posterior, unit, 0, [under], drift=0.03)
-    random = fault_intensities(later, _posterior(ridge).posterior, unit, 0, [under])
-    conditional, at_random = paired[under.name], random[under.name]
-    assert conditional.mean() == pytest.approx(0.20, abs=0.01)
-    assert conditional.std() < 0.05 < at_random.std() / 2  # the ridge's ±11 % twice: 0.13
-    unrelated = {"M0": ridge["M0"], "CF_POW": rng.permutation(power)}
-    alone = fault_intensities(later, _posterior(unrelated).posterior, unit, 0, [under], drift=0.03)
-    assert alone[under.name].std() == pytest.approx(at_random.std(), rel=0.1)
-    few = {name: values[:15] for name, values in ridge.items()}  # < 10 per term: the marginal
-    sparse = fault_intensities(later, _posterior(few).posterior, unit, 0, [under], drift=0.03)
-    assert sparse[under.name].std() > 0.05
-
-
 def test_the_model_form_spreads_each_intensity_in_proportion_and_zero_leaves_it():
     """Each draw times 1 + N(0, spread²): a fault read at 0.3 for sure spreads to sd 0.3 ×
     spread around 0.3; a reading of 0 stays 0; spread 0 is the model's reading; a negative or
