@@ -34,7 +34,7 @@ from pymc_vcc.execution.executors import Executor
 from pymc_vcc.inference.error_model import SensorAccuracy, plateau_windows, summarise
 from pymc_vcc.physics.cycles.split_cooling import SplitCooling
 from pymc_vcc.physics.integration.solver import Solver
-from pymc_vcc.physics.simulate import VCCSimulator
+from pymc_vcc.physics.simulate import VCCSimulator, operating_point
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.faults import (
     FAULT_PROBABILITY,
@@ -45,6 +45,7 @@ from pymc_vcc.studies.faults import (
     check_fault_probability,
     check_model_form,
     fault_intensities,
+    paired_commissioning,
     with_model_form,
 )
 from pymc_vcc.studies.record_budget import CHARGE, held_inputs, plateau_edges
@@ -67,6 +68,10 @@ half of the model's error drawn at the first's posterior, the faulted unit, and 
 first's, mostly at the unit as commissioned. Drawn at the commissioned unit alone, a large
 fault's own model error was read as a second fault (a 30 % undercharge with a liquid-line
 restriction); drawn at the posterior alone, a healthy unit's record read a fault."""
+RATING_PAIRS = 96
+"""Posterior draws (each paired with a commissioning draw) the change of capacity and COP at
+the rating point is read on (:func:`rating_change`): about 10 ms of simulation each."""
+RATED = ("capacity", "COP")  # what :func:`rating_change` compares
 
 
 def check_named(named: float) -> None:
@@ -97,6 +102,10 @@ class Diagnosis:
             its form error.
         model_form: the form error's relative sd in :attr:`intensities`.
         named: the probability that named a fault in :attr:`verdict`.
+        rating: what the unit lost since commissioning at its rating point, every fault and
+            drift together: ``"capacity"`` and ``"COP"`` -> their relative changes, one per
+            pair of posterior draws (:func:`rating_change`).
+        rating_failed: the pairs whose rating-point runs failed (left out of :attr:`rating`).
     """
 
     tree: xr.DataTree
@@ -109,6 +118,8 @@ class Diagnosis:
     model_intensities: dict[str, np.ndarray] = field(default_factory=dict)
     model_form: float = 0.0
     named: float = NAMED
+    rating: dict[str, np.ndarray] = field(default_factory=dict)
+    rating_failed: int = 0
 
     def summary(self) -> dict:
         """The JSON summary: per fault its intensity (mean, 95 % interval) and probability."""
@@ -133,6 +144,10 @@ class Diagnosis:
             "commissioning_unreproduced": self.unreproduced,
             "model_form": self.model_form,
             "named_at": self.named,
+            "rating_change": {
+                name: _interval(changes) for name, changes in self.rating.items() if changes.size
+            },
+            "rating_pairs_failed": self.rating_failed,
         }
 
     def plot(self) -> Figure:
@@ -156,6 +171,7 @@ class Diagnosis:
             f"verdict: {self.verdict} (a fault is named at P(fault) >= {self.named:g})",
             f"charge change since commissioning: {charge.mean():+.3f} kg "
             f"(95 % interval {low:+.3f} to {high:+.3f} kg)",
+            self._rating_line(),
             "",
             f"{'fault':<42} {'intensity (95 % interval)':>32}  {'threshold':>10}  P(fault)",
         ]
@@ -180,6 +196,24 @@ class Diagnosis:
         if self.unreproduced:
             lines.append(f"\n{_misfit_caution(self.unreproduced)}")
         return "\n".join(lines)
+
+    def _rating_line(self) -> str:
+        """The report's line on what the unit lost at its rating point."""
+        read = {name: changes for name, changes in self.rating.items() if changes.size}
+        if not read:
+            return "capacity and COP at the rating point: not read (every run failed)"
+        parts = []
+        for name, changes in read.items():
+            at = _interval(100 * changes)
+            parts.append(f"{name} {at['mean']:+.1f} % ({at['low']:+.1f} to {at['high']:+.1f})")
+        failed = f"; {self.rating_failed} pair(s) failed" if self.rating_failed else ""
+        return f"since commissioning, at the rating point: {', '.join(parts)}{failed}"
+
+
+def _interval(draws: np.ndarray) -> dict[str, float]:
+    """Mean and 95 % interval of ``draws``."""
+    low, high = np.quantile(draws, [0.025, 0.975])
+    return {"mean": float(draws.mean()), "low": float(low), "high": float(high)}
 
 
 def commissioning_misfits(commissioning: xr.DataTree) -> list[str]:
@@ -290,6 +324,49 @@ def separating_sensor(
     return outputs[int(np.argmax(gap))]
 
 
+def rating_change(
+    later: Mapping[str, np.ndarray],
+    commissioning: xr.Dataset,
+    unit: Unit,
+    seed: int,
+    solver: str | Solver = "cvode",
+    pairs: int = RATING_PAIRS,
+) -> tuple[dict[str, np.ndarray], int]:
+    """What the unit lost since commissioning at its rating point: per pair of a later
+    posterior draw and a commissioning draw (:func:`~pymc_vcc.studies.faults.paired_commissioning`,
+    ``pairs`` of them, evenly spread over the later draws), the relative change of the cycle's
+    capacity and COP (:data:`RATED`) at the unit's rating inputs, every fault and drift together.
+
+    Args:
+        later: variable -> the later posterior's draws (the model's charge in ``M0_model``).
+        commissioning: the commissioning posterior (its ``posterior`` group).
+        unit: the unit.
+        seed: seeds the pairing, as :func:`~pymc_vcc.studies.faults.fault_intensities`'s.
+        solver: ODE solver.
+        pairs: the most pairs simulated.
+
+    Returns:
+        ``{"capacity": changes, "COP": changes}`` (fractions; pairs whose runs failed left
+        out) and the number of pairs left out.
+    """
+    n_later = len(later[CHARGE])
+    paired = paired_commissioning(n_later, commissioning, seed)
+    known = {*unit.parameters.ids, *unit.faults.ids}
+
+    def rated(draws: Mapping[str, np.ndarray], k: int) -> np.ndarray:
+        theta = {name: float(values[k]) for name, values in draws.items() if name in known}
+        theta[CHARGE] = float(draws.get(MODEL_CHARGE, draws[CHARGE])[k])
+        point = operating_point(unit, theta, solver=solver)
+        if point["status"] != "ok":
+            return np.full(len(RATED), np.nan)
+        return np.array([float(point[name]) for name in RATED])
+
+    chosen = np.unique(np.linspace(0, n_later - 1, min(pairs, n_later)).round().astype(int))
+    ratios = np.array([rated(later, k) / rated(paired, k) - 1.0 for k in chosen])
+    kept = np.isfinite(ratios).all(axis=1)
+    return {name: ratios[kept, j] for j, name in enumerate(RATED)}, int((~kept).sum())
+
+
 def diagnose(
     observed: xr.Dataset,
     inputs: xr.Dataset,
@@ -376,6 +453,7 @@ def diagnose(
         f.name: beyond_probability(read[f.name], f.threshold, model_form) for f in FAULTS
     }
     text, pairs = verdict(probabilities, named)
+    rating, rating_failed = rating_change(samples, posterior, unit, seed, solver)
     by_name = {f.name: f for f in FAULTS}
     point = {name: float(values.mean()) for name, values in samples.items()}
     point[CHARGE] = point.get(MODEL_CHARGE, point[CHARGE])
@@ -411,6 +489,8 @@ def diagnose(
         model_intensities=read,
         model_form=model_form,
         named=named,
+        rating=rating,
+        rating_failed=rating_failed,
     )
 
 

@@ -43,9 +43,10 @@ import xarray as xr
 from pymc_vcc.execution.executors import Executor
 from pymc_vcc.physics.cycles import OUTPUT_IDS
 from pymc_vcc.physics.inputs import builtin_inputs
-from pymc_vcc.physics.unit import load_unit
+from pymc_vcc.physics.simulate import operating_point
+from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
-from pymc_vcc.studies.diagnose import ROUNDS, diagnose, verdict
+from pymc_vcc.studies.diagnose import RATED, ROUNDS, diagnose, verdict
 from pymc_vcc.studies.faults import FAULTS, MODEL_FORM, beyond_probability
 from pymc_vcc.studies.truths import (
     RECORD_SECONDS,
@@ -170,6 +171,7 @@ class FaultBenchmarkResult:
             f"{t['leak_false_alarm_rate']:.2f} of the no-fault cases; detection "
             + ", ".join(f"{p:.2f} at a {100 * loss:.0f} % loss" for loss, p in t["leak_detection"]),
             *([] if t["pairs"] is None else [_pairs_line(t["pairs"])]),
+            *([] if t["rating"] is None else [_rating_score_line(t["rating"])]),
             f"simulations per case: {t['simulations']:.0f}; s per case: {t['seconds']:.0f}",
             "",
             "fault                                     cases  correct  severity error  covered",
@@ -194,6 +196,16 @@ def _pairs_line(pairs: dict) -> str:
         "severity error (median) "
         f"{pairs['median_severity_error']:.2f}; intensities inside their 95 % intervals "
         f"{pairs['intensity_coverage']:.2f}"
+    )
+
+
+def _rating_score_line(rating: dict[str, dict[str, float]]) -> str:
+    """What the unit lost at its rating point, read against the truth, as ``pymc-vcc validate
+    --faults`` prints it."""
+    return "change at the rating point since commissioning: " + "; ".join(
+        f"{name} error (median) {100 * read['median_error']:.1f} points of the rating, inside "
+        f"its 95 % interval {read['coverage']:.2f}"
+        for name, read in rating.items()
     )
 
 
@@ -278,9 +290,15 @@ def _reading(truth: float, draws: np.ndarray, read: np.ndarray) -> dict:
     }
 
 
-def _case_row(fault: str | tuple[str, str] | None, truths: dict[str, float], diagnosis) -> dict:
+def _case_row(
+    fault: str | tuple[str, str] | None,
+    truths: dict[str, float],
+    diagnosis,
+    rating: dict[str, float] | None = None,
+) -> dict:
     """A case's row: its verdict and score, every fault's probability and reading; the true
-    fault's reading (of two faults, each one's under ``faults_read``)."""
+    fault's reading (of two faults, each one's under ``faults_read``); given the ``rating``
+    change the unit truly had (:func:`true_rating_change`), the diagnosis's reading of it."""
     row = {
         "fault": list(fault) if isinstance(fault, tuple) else fault,
         "true_intensity": truths[fault] if isinstance(fault, str) else 0.0,
@@ -301,7 +319,40 @@ def _case_row(fault: str | tuple[str, str] | None, truths: dict[str, float], dia
         row |= readings[fault] | {"model_form": diagnosis.model_form}
     elif fault is not None:
         row |= {"faults_read": readings, "model_form": diagnosis.model_form}
+    if rating is not None:
+        row["rating"] = {
+            name: _rating_reading(truth, diagnosis.rating[name]) for name, truth in rating.items()
+        }
     return row
+
+
+def _rating_reading(truth: float, changes: np.ndarray) -> dict:
+    """The diagnosis's reading of a rating-point change (fractions) against the true one."""
+    if not changes.size:
+        return {"true": truth, "mean": None, "low": None, "high": None, "covered": False}
+    low, high = np.quantile(changes, [0.025, 0.975])
+    return {
+        "true": truth,
+        "mean": float(changes.mean()),
+        "low": float(low),
+        "high": float(high),
+        "covered": bool(low <= truth <= high),
+    }
+
+
+def true_rating_change(
+    unit: Unit, healthy: Truth, parameters: dict[str, float], solver: str = "cvode"
+) -> dict[str, float]:
+    """The change of capacity and COP (fractions, :data:`~pymc_vcc.studies.diagnose.RATED`)
+    at the rating inputs of a true unit (its coils' volumes) from ``healthy`` as commissioned
+    to ``parameters`` (worn, and the case's faults): what
+    :func:`~pymc_vcc.studies.diagnose.rating_change` reads. NaN where a run failed."""
+    true_unit = unit.with_changes(discretisation={"n_volumes": healthy.n_volumes})
+    before = operating_point(true_unit, healthy.parameters, solver=solver)
+    after = operating_point(true_unit, parameters, solver=solver)
+    if before["status"] != "ok" or after["status"] != "ok":
+        return dict.fromkeys(RATED, float("nan"))
+    return {name: float(after[name]) / float(before[name]) - 1.0 for name in RATED}
 
 
 def unbiased_naming(rows: Sequence[dict], named: float, model_form: float = MODEL_FORM) -> float:
@@ -475,12 +526,32 @@ def summarise_cases(rows: Sequence[dict]) -> dict:
             for size in sorted({loss(r) for r in leaks})
         ],
         "model_form_needed": model_form_needed(rows),
+        "rating": _summarise_rating(rows),
         "simulations": statistics.fmean(r["simulations"] for r in rows),
         "seconds": statistics.median(r["seconds"] for r in rows),
         "by_fault": by_fault,
         "by_size": correct_by_size(rows),
         "pairs": _summarise_pairs(pairs) if pairs else None,
     }
+
+
+def _summarise_rating(rows: Sequence[dict]) -> dict[str, dict[str, float]] | None:
+    """Per rated quantity, of the rows that read it (:func:`true_rating_change`), the median
+    error of the reading's mean (fraction of the rating) and the share of true changes inside
+    the 95 % intervals (a reading every run of which failed counts as not covering)."""
+    rated = [r["rating"] for r in rows if "rating" in r]
+    if not rated:
+        return None
+    summary = {}
+    for name in RATED:
+        readings = [read[name] for read in rated if np.isfinite(read[name]["true"])]
+        errors = [abs(r["mean"] - r["true"]) for r in readings if r["mean"] is not None]
+        summary[name] = {
+            "cases": len(readings),
+            "median_error": statistics.median(errors) if errors else float("nan"),
+            "coverage": statistics.fmean(r["covered"] for r in readings) if readings else 0.0,
+        }
+    return summary
 
 
 def _summarise_pairs(rows: Sequence[dict]) -> dict:
@@ -618,7 +689,8 @@ def fault_benchmark(
                     rounds=rounds,
                     method=method,
                 )
-                row = _case_row(case[0], truths, diagnosis) | {
+                rating = true_rating_change(unit, healthy, parameters, settings.solver or "cvode")
+                row = _case_row(case[0], truths, diagnosis, rating) | {
                     "case": key[1],
                     "unit_seed": seed,
                     "variant": variant,

@@ -240,19 +240,27 @@ def fault_intensities(
     Args:
         later: parameter -> the later posterior's draws (the unit's charge in ``M0``).
         commissioning: the commissioning posterior (its ``posterior`` group); one of its draws,
-            picked at random (``seed``), is paired with each later draw.
+            picked at random (``seed``), is paired with each later draw
+            (:func:`paired_commissioning`).
         unit: the unit.
         seed: seeds the pairing.
         faults: the faults (default: the standard set).
     """
+    paired = paired_commissioning(len(later[CHARGE]), commissioning, seed)
+    commissioned = {pid: values for pid, values in paired.items() if pid in unit.parameters.ids}
+    return {fault.name: fault.intensity(later, commissioned, unit) for fault in faults}
+
+
+def paired_commissioning(
+    n_later: int, commissioning: xr.Dataset, seed: int
+) -> dict[str, np.ndarray]:
+    """One commissioning posterior draw per later draw, picked at random (``seed``): each
+    variable of ``commissioning`` (its ``posterior`` group) -> its ``n_later`` paired values."""
     n_commissioning = commissioning.sizes["chain"] * commissioning.sizes["draw"]
-    picks = np.random.default_rng(seed).integers(0, n_commissioning, len(later[CHARGE]))
-    paired = {
-        str(pid): commissioning[pid].values.ravel()[picks]
-        for pid in commissioning.data_vars
-        if pid in unit.parameters.ids
+    picks = np.random.default_rng(seed).integers(0, n_commissioning, n_later)
+    return {
+        str(name): commissioning[name].values.ravel()[picks] for name in commissioning.data_vars
     }
-    return {fault.name: fault.intensity(later, paired, unit) for fault in faults}
 
 
 __all__ = [
@@ -266,5 +274,6 @@ __all__ = [
     "coil_conductance",
     "fault_intensities",
     "moved_parameters",
+    "paired_commissioning",
     "with_model_form",
 ]

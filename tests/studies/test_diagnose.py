@@ -247,6 +247,12 @@ def test_a_commissioning_the_model_missed_is_named_in_the_report():
     diagnosis.model_form = 0.15
     assert "the model's form error: ±15 % of each intensity" in diagnosis.format_table()
     assert diagnosis.summary()["commissioning_unreproduced"] == ["PD", "TS"]
+    assert "at the rating point: not read (every run failed)" in diagnosis.format_table()
+    diagnosis.rating = {"capacity": np.array([-0.10, -0.12]), "COP": np.array([-0.05, -0.07])}
+    diagnosis.rating_failed = 1
+    line = "since commissioning, at the rating point: capacity -11.0 % (-11.9 to -10.1), COP -6.0"
+    assert line in diagnosis.format_table() and "1 pair(s) failed" in diagnosis.format_table()
+    assert diagnosis.summary()["rating_change"]["COP"]["mean"] == pytest.approx(-0.06)
 
 
 def test_cases_are_scored_in_yuill_and_brauns_categories():
@@ -402,6 +408,45 @@ def test_score_table_counts_rates_among_healthy_and_faulted_cases():
         "cases": 2, "correct": 0.5, "severity_error": pytest.approx(0.3), "covered": 0.5
     }  # fmt: skip
     assert table["pairs"] is None
+    assert table["rating"] is None  # rows written before the rating point was read
+
+
+def test_the_rating_point_change_is_scored_against_the_true_units():
+    """The median error of the rating-point reading and the share of true changes inside its
+    interval; a reading whose runs all failed does not cover, a truth that failed is left out."""
+    from pymc_vcc.studies.fault_benchmark import FaultBenchmarkResult, summarise_cases
+
+    def read(true, mean, low, high):
+        return {
+            "true": true,
+            "mean": mean,
+            "low": low,
+            "high": high,
+            "covered": low <= true <= high,
+        }
+
+    failed = {"true": -0.1, "mean": None, "low": None, "high": None, "covered": False}
+    ratings = [
+        {"capacity": read(-0.10, -0.12, -0.15, -0.09), "COP": read(-0.05, -0.06, -0.08, -0.04)},
+        {"capacity": read(0.00, 0.01, -0.01, 0.02), "COP": read(-0.02, 0.00, -0.01, 0.01)},
+        {"capacity": failed, "COP": read(float("nan"), 0.0, -0.01, 0.01)},
+    ]
+    rows = [
+        {"fault": None, "score": "correct", "simulations": 1, "seconds": 1.0, "rating": rating,
+         "true_intensity": 0.0, "probabilities": {"undercharge": 0.0}}
+        for rating in ratings
+    ]  # fmt: skip
+    table = summarise_cases(rows)
+    assert table["rating"]["capacity"] == {
+        "cases": 3, "median_error": pytest.approx(0.015), "coverage": pytest.approx(2 / 3)
+    }  # fmt: skip
+    assert table["rating"]["COP"] == {
+        "cases": 2, "median_error": pytest.approx(0.015), "coverage": 0.5
+    }  # fmt: skip
+    printed = FaultBenchmarkResult(rows, table).format_table()
+    assert "capacity error (median) 1.5 points of the rating, inside its 95 % interval 0.67" in (
+        printed
+    )
 
 
 def test_two_faults_at_once_are_scored_apart_from_the_cases_of_one():
@@ -465,6 +510,12 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     gas = first.runs[1]
     assert gas["true_intensity"] == 150e3 and gas["later_seconds"] == LATER_SECONDS
     assert gas["later_start"] == 0.0
+    for row in first.runs:  # what the unit lost at its rating point, the truth's and as read
+        for read in row["rating"].values():
+            assert np.isfinite(read["true"]) and read["low"] <= read["mean"] <= read["high"]
+    wear = first.runs[0]["rating"]  # a month's wear alone moves the rating by little
+    assert abs(wear["capacity"]["true"]) < 0.05 and abs(wear["COP"]["true"]) < 0.05
+    assert "change at the rating point since commissioning: capacity" in first.format_table()
     assert gas["intensity_low"] <= gas["intensity_mean"] <= gas["intensity_high"]
     # the row keeps the model's own reading too, from which the form error is measured
     assert gas["model_form"] == MODEL_FORM and gas["model_sd"] > 0
@@ -627,3 +678,43 @@ def test_a_unit_heating_is_refused_in_one_line_before_any_work():
 
     with pytest.raises(ValueError, match=r"faults of a unit cooling .* is 'heat-pump-heating'"):
         diagnose(None, None, None, None, unit=load_unit(HEAT_PUMP_UNIT))  # type: ignore[arg-type]
+
+
+def test_the_rating_point_reads_what_the_unit_lost_since_commissioning(monkeypatch):
+    """Capacity and COP at the rating inputs, a later draw against its paired commissioning
+    draw: the same unit loses nothing (the same simulation), 40 % less indoor airflow costs
+    capacity and COP (−18 % and −12 % on the nominal unit), non-condensable gas costs COP
+    (about 1 % at 120 kPa) more than capacity; a pair whose run fails is left out and counted."""
+    import pymc_vcc.studies.diagnose as diagnose_module
+    from pymc_vcc.physics.unit import load_unit
+    from pymc_vcc.studies.diagnose import rating_change
+
+    unit = load_unit()
+    flow = unit.parameter_spec("FI_FLOW").nominal
+    commissioned = _posterior({"M0": [1.6] * 4, "FI_FLOW": [flow] * 4})["posterior"]
+    same, failed = rating_change({"M0": np.full(3, 1.6), "FI_FLOW": np.full(3, flow)},
+                                 commissioned, unit, 0)  # fmt: skip
+    assert failed == 0 and set(same) == {"capacity", "COP"}
+    assert np.abs(same["capacity"]).max() < 1e-9 and np.abs(same["COP"]).max() < 1e-9
+    clogged, _ = rating_change({"M0": np.full(2, 1.6), "FI_FLOW": np.full(2, 0.6 * flow)},
+                               commissioned, unit, 0)  # fmt: skip
+    assert -0.25 < clogged["capacity"].mean() < -0.12 and clogged["COP"].mean() < -0.06
+    gas, _ = rating_change(
+        {"M0": np.full(2, 1.6), "FI_FLOW": np.full(2, flow), "P_NCG": np.full(2, 120e3)},
+        commissioned,
+        unit,
+        0,
+    )
+    assert abs(gas["capacity"].mean()) < 0.01 and gas["COP"].mean() < -0.005
+    assert gas["COP"].mean() < -2 * abs(gas["capacity"].mean())  # the compressor's work rises
+    real = diagnose_module.operating_point
+    calls = iter(range(100))
+
+    def failing_first(*args, **kwargs):
+        point = real(*args, **kwargs)
+        return point | {"status": "failed"} if next(calls) == 0 else point
+
+    monkeypatch.setattr(diagnose_module, "operating_point", failing_first)
+    kept, failed = rating_change({"M0": np.full(3, 1.6), "FI_FLOW": np.full(3, flow)},
+                                 commissioned, unit, 0)  # fmt: skip
+    assert failed == 1 and len(kept["COP"]) == 2
