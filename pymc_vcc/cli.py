@@ -719,7 +719,7 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose = commands.add_parser(
         "diagnose",
         help="the faults of a unit's LOG since its commissioning (--prior): each fault's "
-        "intensity and probability, and a verdict",
+        "intensity and probability, a verdict, and what the unit lost at its rating point",
     )
     diagnose.add_argument("log", metavar="LOG", help="a CSV log of the unit")
     diagnose.add_argument(

@@ -7,7 +7,8 @@
 (:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), correct diagnosis by the fault's
 size (:func:`~pymc_vcc.studies.fault_benchmark.correct_by_size`), the scores of each case (of
 the cases of two faults at once apart), the cases not diagnosed correctly or whose interval
-misses, and what the verdicts would have scored
+misses, what the units truly lost at their rating point beside the diagnosis's reading of it
+(rows that keep it), and what the verdicts would have scored
 at other naming probabilities (:func:`~pymc_vcc.studies.fault_benchmark.rescored`), beside
 what a reading without bias would have named
 (:func:`~pymc_vcc.studies.fault_benchmark.unbiased_naming`, for rows that keep the readings).
@@ -20,7 +21,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from pymc_vcc.studies.diagnose import NAMED
+from pymc_vcc.studies.diagnose import NAMED, RATED
 from pymc_vcc.studies.fault_benchmark import (
     CASES,
     PAIR_SCORES,
@@ -178,6 +179,30 @@ def _pairs(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _rating(rows: list[dict]) -> str:
+    """Per case, what the unit truly lost at its rating point and how the diagnosis read it:
+    the median true change of each rated quantity, the median error of its reading and how
+    many true changes its 95 % intervals hold (rows that read it only)."""
+    header = " | ".join(
+        f"{name}: true change (median) | error (median) | covered" for name in RATED
+    )
+    lines = [f"| case | cases | {header} |", "|---|" + "---:|" * (1 + 3 * len(RATED))]
+    for case in CASES:
+        mine = [r["rating"] for r in rows if r["case"] == case_label(case) and "rating" in r]
+        if not mine:
+            continue
+        cells = [_case_name(case_label(case)), str(len(mine))]
+        for name in RATED:
+            reads = [m[name] for m in mine]
+            read = [r for r in reads if r["mean"] is not None]
+            cells.append(f"{100 * statistics.median(r['true'] for r in reads):+.1f} %")
+            error = statistics.median(abs(r["mean"] - r["true"]) for r in read) if read else None
+            cells.append("—" if error is None else f"{100 * error:.1f}")
+            cells.append(f"{sum(r['covered'] for r in reads)}/{len(reads)}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def _trade_off(rows: list[dict]) -> str:
     widths = all("model_reads" in r for r in rows if isinstance(r["fault"], str))
     lines = [
@@ -202,6 +227,8 @@ def main(paths: list[str]) -> None:
     if len(single) < len(rows):
         tables.append(_pairs(rows))
     tables.append(_failures(rows))
+    if any("rating" in r for r in rows):
+        tables.append(_rating(rows))
     if single:
         tables.append(_trade_off(rows))
     print(*tables, sep="\n\n")

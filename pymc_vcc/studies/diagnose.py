@@ -45,6 +45,7 @@ from pymc_vcc.studies.faults import (
     check_fault_probability,
     check_model_form,
     fault_intensities,
+    moved_parameters,
     paired_commissioning,
     with_model_form,
 )
@@ -68,10 +69,11 @@ half of the model's error drawn at the first's posterior, the faulted unit, and 
 first's, mostly at the unit as commissioned. Drawn at the commissioned unit alone, a large
 fault's own model error was read as a second fault (a 30 % undercharge with a liquid-line
 restriction); drawn at the posterior alone, a healthy unit's record read a fault."""
-RATING_PAIRS = 96
-"""Posterior draws (each paired with a commissioning draw) the change of capacity and COP at
-the rating point is read on (:func:`rating_change`): about 10 ms of simulation each."""
-RATED = ("capacity", "COP")  # what :func:`rating_change` compares
+RATING_DRAWS = 96
+"""Posterior draws what the faults cost at the rating point is read on (:func:`rating_change`):
+two operating points of about 10 ms each per draw."""
+RATED = ("capacity", "COP")
+"""What :func:`rating_change` compares: the cycle's capacity (W) and COP at the rating point."""
 
 
 def check_named(named: float) -> None:
@@ -102,10 +104,10 @@ class Diagnosis:
             its form error.
         model_form: the form error's relative sd in :attr:`intensities`.
         named: the probability that named a fault in :attr:`verdict`.
-        rating: what the unit lost since commissioning at its rating point, every fault and
-            drift together: ``"capacity"`` and ``"COP"`` -> their relative changes, one per
-            pair of posterior draws (:func:`rating_change`).
-        rating_failed: the pairs whose rating-point runs failed (left out of :attr:`rating`).
+        rating: what the faults cost at the rating point: ``"capacity"`` and ``"COP"`` ->
+            their relative changes with the faults undone, one per posterior draw
+            (:func:`rating_change`).
+        rating_failed: the draws whose rating-point runs failed (left out of :attr:`rating`).
     """
 
     tree: xr.DataTree
@@ -147,7 +149,7 @@ class Diagnosis:
             "rating_change": {
                 name: _interval(changes) for name, changes in self.rating.items() if changes.size
             },
-            "rating_pairs_failed": self.rating_failed,
+            "rating_draws_failed": self.rating_failed,
         }
 
     def plot(self) -> Figure:
@@ -198,16 +200,16 @@ class Diagnosis:
         return "\n".join(lines)
 
     def _rating_line(self) -> str:
-        """The report's line on what the unit lost at its rating point."""
+        """The report's line on what the faults cost at the rating point."""
         read = {name: changes for name, changes in self.rating.items() if changes.size}
         if not read:
-            return "capacity and COP at the rating point: not read (every run failed)"
+            return "what the faults cost at the rating point: not read (every run failed)"
         parts = []
         for name, changes in read.items():
             at = _interval(100 * changes)
             parts.append(f"{name} {at['mean']:+.1f} % ({at['low']:+.1f} to {at['high']:+.1f})")
-        failed = f"; {self.rating_failed} pair(s) failed" if self.rating_failed else ""
-        return f"since commissioning, at the rating point: {', '.join(parts)}{failed}"
+        failed = f"; {self.rating_failed} draw(s) failed" if self.rating_failed else ""
+        return f"what the faults cost at the rating point: {', '.join(parts)}{failed}"
 
 
 def _interval(draws: np.ndarray) -> dict[str, float]:
@@ -330,12 +332,16 @@ def rating_change(
     unit: Unit,
     seed: int,
     solver: str | Solver = "cvode",
-    pairs: int = RATING_PAIRS,
+    draws: int = RATING_DRAWS,
 ) -> tuple[dict[str, np.ndarray], int]:
-    """What the unit lost since commissioning at its rating point: per pair of a later
-    posterior draw and a commissioning draw (:func:`~pymc_vcc.studies.faults.paired_commissioning`,
-    ``pairs`` of them, evenly spread over the later draws), the relative change of the cycle's
-    capacity and COP (:data:`RATED`) at the unit's rating inputs, every fault and drift together.
+    """What the faults cost at the rating point: per later posterior draw (``draws`` of them,
+    evenly spread), the relative change of the cycle's capacity and COP (:data:`RATED`) at the
+    unit's rating inputs between the unit as the draw has it and the same unit with every
+    fault undone (the fault parameters at 0 and what the faults move, the charge and the
+    coils' air sides, at a commissioning draw paired with it as
+    :func:`~pymc_vcc.studies.faults.fault_intensities` pairs them). What no fault moves (the
+    compressor's and the valve's factors) stays the draw's: their drift is no fault's, and a
+    commissioning draw elsewhere on the ridge its data left would read a cost that is not there.
 
     Args:
         later: variable -> the later posterior's draws (the model's charge in ``M0_model``).
@@ -343,26 +349,33 @@ def rating_change(
         unit: the unit.
         seed: seeds the pairing, as :func:`~pymc_vcc.studies.faults.fault_intensities`'s.
         solver: ODE solver.
-        pairs: the most pairs simulated.
+        draws: the most later draws simulated.
 
     Returns:
-        ``{"capacity": changes, "COP": changes}`` (fractions; pairs whose runs failed left
-        out) and the number of pairs left out.
+        ``{"capacity": changes, "COP": changes}`` (fractions; draws whose runs failed left
+        out) and the number of draws left out.
     """
     n_later = len(later[CHARGE])
     paired = paired_commissioning(n_later, commissioning, seed)
-    known = {*unit.parameters.ids, *unit.faults.ids}
+    moved = set(moved_parameters(unit)) & set(paired)  # a posterior holds them all (later_prior)
 
-    def rated(draws: Mapping[str, np.ndarray], k: int) -> np.ndarray:
-        theta = {name: float(values[k]) for name, values in draws.items() if name in known}
-        theta[CHARGE] = float(draws.get(MODEL_CHARGE, draws[CHARGE])[k])
+    def rated(k: int, undone: bool) -> np.ndarray:
+        theta = {
+            name: float(values[k])
+            for name, values in later.items()
+            if name in unit.parameters.ids or (name in unit.faults.ids and not undone)
+        }
+        theta[CHARGE] = float(later.get(MODEL_CHARGE, later[CHARGE])[k])
+        if undone:
+            theta |= {name: float(paired[name][k]) for name in moved}
+            theta[CHARGE] = float(paired.get(MODEL_CHARGE, paired[CHARGE])[k])
         point = operating_point(unit, theta, solver=solver)
         if point["status"] != "ok":
             return np.full(len(RATED), np.nan)
         return np.array([float(point[name]) for name in RATED])
 
-    chosen = np.unique(np.linspace(0, n_later - 1, min(pairs, n_later)).round().astype(int))
-    ratios = np.array([rated(later, k) / rated(paired, k) - 1.0 for k in chosen])
+    chosen = np.unique(np.linspace(0, n_later - 1, min(draws, n_later)).round().astype(int))
+    ratios = np.array([rated(k, undone=False) / rated(k, undone=True) - 1.0 for k in chosen])
     kept = np.isfinite(ratios).all(axis=1)
     return {name: ratios[kept, j] for j, name in enumerate(RATED)}, int((~kept).sum())
 

@@ -47,7 +47,7 @@ from pymc_vcc.physics.simulate import operating_point
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
 from pymc_vcc.studies.diagnose import RATED, ROUNDS, diagnose, verdict
-from pymc_vcc.studies.faults import FAULTS, MODEL_FORM, beyond_probability
+from pymc_vcc.studies.faults import FAULTS, MODEL_FORM, beyond_probability, moved_parameters
 from pymc_vcc.studies.truths import (
     RECORD_SECONDS,
     VARIANTS,
@@ -200,9 +200,9 @@ def _pairs_line(pairs: dict) -> str:
 
 
 def _rating_score_line(rating: dict[str, dict[str, float]]) -> str:
-    """What the unit lost at its rating point, read against the truth, as ``pymc-vcc validate
-    --faults`` prints it."""
-    return "change at the rating point since commissioning: " + "; ".join(
+    """What the faults cost at the rating point, read against the true cost, as ``pymc-vcc
+    validate --faults`` prints it."""
+    return "what the faults cost at the rating point: " + "; ".join(
         f"{name} error (median) {100 * read['median_error']:.1f} points of the rating, inside "
         f"its 95 % interval {read['coverage']:.2f}"
         for name, read in rating.items()
@@ -297,8 +297,9 @@ def _case_row(
     rating: dict[str, float] | None = None,
 ) -> dict:
     """A case's row: its verdict and score, every fault's probability and reading; the true
-    fault's reading (of two faults, each one's under ``faults_read``); given the ``rating``
-    change the unit truly had (:func:`true_rating_change`), the diagnosis's reading of it."""
+    fault's reading (of two faults, each one's under ``faults_read``); given what the faults
+    truly cost at the rating point (:func:`true_rating_change`), the diagnosis's reading of
+    it."""
     row = {
         "fault": list(fault) if isinstance(fault, tuple) else fault,
         "true_intensity": truths[fault] if isinstance(fault, str) else 0.0,
@@ -327,7 +328,8 @@ def _case_row(
 
 
 def _rating_reading(truth: float, changes: np.ndarray) -> dict:
-    """The diagnosis's reading of a rating-point change (fractions) against the true one."""
+    """The diagnosis's reading of what the faults cost at the rating point (fractions) against
+    the true cost."""
     if not changes.size:
         return {"true": truth, "mean": None, "low": None, "high": None, "covered": False}
     low, high = np.quantile(changes, [0.025, 0.975])
@@ -343,16 +345,20 @@ def _rating_reading(truth: float, changes: np.ndarray) -> dict:
 def true_rating_change(
     unit: Unit, healthy: Truth, parameters: dict[str, float], solver: str = "cvode"
 ) -> dict[str, float]:
-    """The change of capacity and COP (fractions, :data:`~pymc_vcc.studies.diagnose.RATED`)
-    at the rating inputs of a true unit (its coils' volumes) from ``healthy`` as commissioned
-    to ``parameters`` (worn, and the case's faults): what
-    :func:`~pymc_vcc.studies.diagnose.rating_change` reads. NaN where a run failed."""
+    """What a true unit's faults cost at its rating point, as
+    :func:`~pymc_vcc.studies.diagnose.rating_change` reads it: the relative change of
+    capacity and COP (:data:`~pymc_vcc.studies.diagnose.RATED`) at the rating inputs between
+    the unit with ``parameters`` (worn, and the case's faults; its coils' volumes) and the
+    same unit with every fault undone (the fault parameters at 0, what the faults move back at
+    the ``healthy`` unit's values). NaN where a run failed."""
     true_unit = unit.with_changes(discretisation={"n_volumes": healthy.n_volumes})
-    before = operating_point(true_unit, healthy.parameters, solver=solver)
-    after = operating_point(true_unit, parameters, solver=solver)
-    if before["status"] != "ok" or after["status"] != "ok":
+    undone = {name: value for name, value in parameters.items() if name not in unit.faults.ids}
+    undone |= {name: healthy.parameters[name] for name in moved_parameters(unit)}
+    now = operating_point(true_unit, parameters, solver=solver)
+    fixed = operating_point(true_unit, undone, solver=solver)
+    if now["status"] != "ok" or fixed["status"] != "ok":
         return dict.fromkeys(RATED, float("nan"))
-    return {name: float(after[name]) / float(before[name]) - 1.0 for name in RATED}
+    return {name: float(now[name]) / float(fixed[name]) - 1.0 for name in RATED}
 
 
 def unbiased_naming(rows: Sequence[dict], named: float, model_form: float = MODEL_FORM) -> float:

@@ -247,11 +247,11 @@ def test_a_commissioning_the_model_missed_is_named_in_the_report():
     diagnosis.model_form = 0.15
     assert "the model's form error: ±15 % of each intensity" in diagnosis.format_table()
     assert diagnosis.summary()["commissioning_unreproduced"] == ["PD", "TS"]
-    assert "at the rating point: not read (every run failed)" in diagnosis.format_table()
+    assert "cost at the rating point: not read (every run failed)" in diagnosis.format_table()
     diagnosis.rating = {"capacity": np.array([-0.10, -0.12]), "COP": np.array([-0.05, -0.07])}
     diagnosis.rating_failed = 1
-    line = "since commissioning, at the rating point: capacity -11.0 % (-11.9 to -10.1), COP -6.0"
-    assert line in diagnosis.format_table() and "1 pair(s) failed" in diagnosis.format_table()
+    line = "what the faults cost at the rating point: capacity -11.0 % (-11.9 to -10.1), COP -6.0"
+    assert line in diagnosis.format_table() and "1 draw(s) failed" in diagnosis.format_table()
     assert diagnosis.summary()["rating_change"]["COP"]["mean"] == pytest.approx(-0.06)
 
 
@@ -510,12 +510,12 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     gas = first.runs[1]
     assert gas["true_intensity"] == 150e3 and gas["later_seconds"] == LATER_SECONDS
     assert gas["later_start"] == 0.0
-    for row in first.runs:  # what the unit lost at its rating point, the truth's and as read
+    for row in first.runs:  # what the faults cost at the rating point, truly and as read
         for read in row["rating"].values():
             assert np.isfinite(read["true"]) and read["low"] <= read["mean"] <= read["high"]
-    wear = first.runs[0]["rating"]  # a month's wear alone moves the rating by little
+    wear = first.runs[0]["rating"]  # no fault: the wear of what faults move costs little
     assert abs(wear["capacity"]["true"]) < 0.05 and abs(wear["COP"]["true"]) < 0.05
-    assert "change at the rating point since commissioning: capacity" in first.format_table()
+    assert "what the faults cost at the rating point: capacity" in first.format_table()
     assert gas["intensity_low"] <= gas["intensity_mean"] <= gas["intensity_high"]
     # the row keeps the model's own reading too, from which the form error is measured
     assert gas["model_form"] == MODEL_FORM and gas["model_sd"] > 0
@@ -680,22 +680,32 @@ def test_a_unit_heating_is_refused_in_one_line_before_any_work():
         diagnose(None, None, None, None, unit=load_unit(HEAT_PUMP_UNIT))  # type: ignore[arg-type]
 
 
-def test_the_rating_point_reads_what_the_unit_lost_since_commissioning(monkeypatch):
-    """Capacity and COP at the rating inputs, a later draw against its paired commissioning
-    draw: the same unit loses nothing (the same simulation), 40 % less indoor airflow costs
-    capacity and COP (−18 % and −12 % on the nominal unit), non-condensable gas costs COP
-    (about 1 % at 120 kPa) more than capacity; a pair whose run fails is left out and counted."""
+def test_the_rating_point_reads_what_the_faults_cost(monkeypatch):
+    """Capacity and COP at the rating inputs, a later draw against itself with its faults
+    undone (what they move at its paired commissioning draw): the same unit costs nothing
+    (the same simulation), and so does a compressor whose power factor drifted (no fault moves
+    it); 40 % less indoor airflow costs capacity and COP (−18 % and −12 % on the nominal unit),
+    non-condensable gas costs COP (about 1 % at 120 kPa) more than capacity; a draw whose run
+    fails is left out and counted."""
     import pymc_vcc.studies.diagnose as diagnose_module
     from pymc_vcc.physics.unit import load_unit
     from pymc_vcc.studies.diagnose import rating_change
 
     unit = load_unit()
     flow = unit.parameter_spec("FI_FLOW").nominal
+    power = unit.parameter_spec("CF_POW").nominal
     commissioned = _posterior({"M0": [1.6] * 4, "FI_FLOW": [flow] * 4})["posterior"]
     same, failed = rating_change({"M0": np.full(3, 1.6), "FI_FLOW": np.full(3, flow)},
                                  commissioned, unit, 0)  # fmt: skip
     assert failed == 0 and set(same) == {"capacity", "COP"}
     assert np.abs(same["capacity"]).max() < 1e-9 and np.abs(same["COP"]).max() < 1e-9
+    drifted, _ = rating_change(
+        {"M0": np.full(2, 1.6), "FI_FLOW": np.full(2, flow), "CF_POW": np.full(2, 1.1 * power)},
+        commissioned,
+        unit,
+        0,
+    )
+    assert np.abs(drifted["COP"]).max() < 1e-9
     clogged, _ = rating_change({"M0": np.full(2, 1.6), "FI_FLOW": np.full(2, 0.6 * flow)},
                                commissioned, unit, 0)  # fmt: skip
     assert -0.25 < clogged["capacity"].mean() < -0.12 and clogged["COP"].mean() < -0.06
