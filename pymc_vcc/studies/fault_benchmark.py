@@ -322,14 +322,16 @@ def _case_row(
         row |= {"faults_read": readings, "model_form": diagnosis.model_form}
     if rating is not None:
         row["rating"] = {
-            name: _rating_reading(truth, diagnosis.rating[name]) for name, truth in rating.items()
+            name: _rating_reading(truth, diagnosis.rating[name], diagnosis.model_rating[name])
+            for name, truth in rating.items()
         }
     return row
 
 
-def _rating_reading(truth: float, changes: np.ndarray) -> dict:
-    """The diagnosis's reading of what the faults cost at the rating point (fractions) against
-    the true cost."""
+def _rating_reading(truth: float, changes: np.ndarray, read: np.ndarray) -> dict:
+    """The diagnosis's reading of what the faults cost at the rating point (fractions; its
+    ``changes``, the model's error included, and the model's own ``read``) against the true
+    cost."""
     if not changes.size:
         return {"true": truth, "mean": None, "low": None, "high": None, "covered": False}
     low, high = np.quantile(changes, [0.025, 0.975])
@@ -339,6 +341,8 @@ def _rating_reading(truth: float, changes: np.ndarray) -> dict:
         "low": float(low),
         "high": float(high),
         "covered": bool(low <= truth <= high),
+        "model_mean": float(read.mean()),
+        "model_sd": float(read.std()),
     }
 
 

@@ -253,6 +253,21 @@ def test_a_commissioning_the_model_missed_is_named_in_the_report():
     line = "what the faults cost at the rating point: capacity -11.0 % (-11.9 to -10.1), COP -6.0"
     assert line in diagnosis.format_table() and "1 draw(s) failed" in diagnosis.format_table()
     assert diagnosis.summary()["rating_change"]["COP"]["mean"] == pytest.approx(-0.06)
+    assert "(the model's error there included, ±1.2 points, 1 sd)" in diagnosis.format_table()
+
+
+def test_the_cost_at_the_rating_point_is_spread_by_the_models_error_there():
+    """Each draw copied and moved by N(0, s²): the mean kept, the variances added."""
+    from pymc_vcc.studies.diagnose import RATING_COPIES, RATING_FORM, with_rating_form
+
+    read = {"COP": np.random.default_rng(1).normal(-0.05, 0.01, 2000)}
+    spread = with_rating_form(read, 0)["COP"]
+    assert spread.size == 2000 * RATING_COPIES
+    assert spread.mean() == pytest.approx(-0.05, abs=5e-4)
+    assert spread.std() == pytest.approx(np.hypot(0.01, RATING_FORM), rel=0.03)
+    assert np.array_equal(
+        with_rating_form(read, 0, 0.0)["COP"], np.repeat(read["COP"], RATING_COPIES)
+    )
 
 
 def test_cases_are_scored_in_yuill_and_brauns_categories():
@@ -513,6 +528,7 @@ def test_fault_benchmark_commissions_diagnoses_and_resumes(tmp_path):
     for row in first.runs:  # what the faults cost at the rating point, truly and as read
         for read in row["rating"].values():
             assert np.isfinite(read["true"]) and read["low"] <= read["mean"] <= read["high"]
+            assert read["model_sd"] >= 0  # the model's own reading, to measure its error
     wear = first.runs[0]["rating"]  # no fault: the wear of what faults move costs little
     assert abs(wear["capacity"]["true"]) < 0.05 and abs(wear["COP"]["true"]) < 0.05
     assert "what the faults cost at the rating point: capacity" in first.format_table()
