@@ -73,6 +73,7 @@ RATING_DRAWS = 96
 """Posterior draws what the faults cost at the rating point is read on (:func:`rating_change`):
 two operating points of about 10 ms each per draw."""
 RATED = ("capacity", "COP")
+"""What :func:`rating_change` compares: the cycle's capacity (W) and COP at the rating point."""
 RATING_FORM = 0.012
 """Sd of the model's error in what the faults cost at the rating point (a fraction of the
 rating, the same for each of :data:`RATED`) on a unit that is not the model: its finer coils,
@@ -81,7 +82,6 @@ on the fault benchmark's units 8500-8700 (66 cases, the model's reading alone co
 the true capacity changes and 71 % of the COP's) as the split-conformal 95 % quantile of the
 spread each case needed: 0.011 for the capacity, 0.012 for the COP."""
 RATING_COPIES = 16  # form-error draws per posterior draw (:func:`with_rating_form`)
-"""What :func:`rating_change` compares: the cycle's capacity (W) and COP at the rating point."""
 
 
 def check_named(named: float) -> None:
