@@ -399,7 +399,7 @@ def with_rating_form(
 ) -> dict[str, np.ndarray]:
     """What the faults cost at the rating point (:func:`rating_change`'s draws) spread by the
     model's error there (:data:`RATING_FORM`): each draw :data:`RATING_COPIES` times, each copy
-    plus N(0, ``spread``²)."""
+    plus N(0, s²), s = ``spread``."""
     rng = np.random.default_rng([seed, 2])
     return {
         name: np.repeat(changes, RATING_COPIES)
