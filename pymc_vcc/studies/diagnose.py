@@ -135,7 +135,8 @@ class Diagnosis:
     rating_failed: int = 0
 
     def summary(self) -> dict:
-        """The JSON summary: per fault its intensity (mean, 95 % interval) and probability."""
+        """The JSON summary: per fault its intensity (mean, 95 % interval) and probability, and
+        what the faults cost at the rating point (mean, 95 % interval)."""
         faults = {}
         for fault in FAULTS:
             draws = self.intensities[fault.name]
@@ -177,7 +178,8 @@ class Diagnosis:
         return plot_fault_intensities(rows, f"verdict: {self.verdict}")
 
     def format_table(self) -> str:
-        """The one-page report: the verdict, then every fault's intensity and probability."""
+        """The one-page report: the verdict, the charge change and what the faults cost at the
+        rating point, then every fault's intensity and probability."""
         charge = self.tree["posterior"][CHARGE].values.ravel() - self.commissioned[CHARGE]
         low, high = np.quantile(charge, [0.025, 0.975])
         lines = [
