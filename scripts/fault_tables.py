@@ -2,16 +2,18 @@
 
 ``pymc-vcc validate --faults all --out DIR`` appends one JSON row per case to
 ``DIR/checkpoints/validate-faults.jsonl``; the measured rows behind the docs are kept in
-``docs/results/runs/``. Run ``.venv/bin/python scripts/fault_tables.py ROWS.jsonl [MORE.jsonl
-...]`` (several runs' rows are pooled): the score
-(:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), correct diagnosis by the fault's
-size (:func:`~pymc_vcc.studies.fault_benchmark.correct_by_size`), the scores of each case (of
-the cases of two faults at once apart), the cases not diagnosed correctly or whose interval
-misses, what the units truly lost at their rating point beside the diagnosis's reading of it
-(rows that keep it), and what the verdicts would have scored
-at other naming probabilities (:func:`~pymc_vcc.studies.fault_benchmark.rescored`), beside
-what a reading without bias would have named
-(:func:`~pymc_vcc.studies.fault_benchmark.unbiased_naming`, for rows that keep the readings).
+``docs/results/runs/``. Run ``.venv/bin/python scripts/fault_tables.py ROWS.jsonl [MORE.jsonl ...]``
+(several runs' rows are pooled): the score
+(:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), correct diagnosis by the fault's size
+(:func:`~pymc_vcc.studies.fault_benchmark.correct_by_size`) and by what it costs at the rating point
+(:func:`~pymc_vcc.studies.fault_benchmark.correct_by_cost`; for rows written before rows kept the
+true cost, computed again: :func:`~pymc_vcc.studies.fault_benchmark.with_true_rating_change`, about
+20 ms a row), the scores of each case (of the cases of two faults at once apart), the cases not
+diagnosed correctly or whose interval misses, what the units truly lost at their rating point beside
+the diagnosis's reading of it (rows that keep it), and what the verdicts would have scored at other
+naming probabilities (:func:`~pymc_vcc.studies.fault_benchmark.rescored`), beside what a reading
+without bias would have named (:func:`~pymc_vcc.studies.fault_benchmark.unbiased_naming`, for rows
+that keep the readings).
 """
 
 from __future__ import annotations
@@ -26,11 +28,14 @@ from pymc_vcc.studies.fault_benchmark import (
     CASES,
     PAIR_SCORES,
     case_label,
+    correct_by_cost,
     correct_by_size,
+    cost_band,
     rescored,
     size_band,
     summarise_cases,
     unbiased_naming,
+    with_true_rating_change,
 )
 from pymc_vcc.studies.faults import FAULTS
 
@@ -95,6 +100,17 @@ def _by_size(rows: list[dict]) -> str:
     for low, high, cases, share in correct_by_size(rows):
         named = f"{round(share * cases)} ({100 * share:.0f} %)" if cases else "—"
         lines.append(f"| {size_band(low, high)} | {cases} | {named} |")
+    return "\n".join(lines)
+
+
+def _by_cost(rows: list[dict]) -> str:
+    lines = [
+        "| what the fault costs at the rating point | faulted cases | correct diagnosis |",
+        "|---|---:|---:|",
+    ]
+    for low, high, cases, share in correct_by_cost(with_true_rating_change(rows)):
+        named = f"{round(share * cases)} ({100 * share:.0f} %)" if cases else "—"
+        lines.append(f"| {cost_band(low, high)} | {cases} | {named} |")
     return "\n".join(lines)
 
 
@@ -223,7 +239,7 @@ def _trade_off(rows: list[dict]) -> str:
 def main(paths: list[str]) -> None:
     rows = [json.loads(line) for path in paths for line in Path(path).read_text().splitlines()]
     single = [r for r in rows if not isinstance(r["fault"], list)]
-    tables = [_summary(rows), _by_size(rows), _by_case(rows)] if single else []
+    tables = [_summary(rows), _by_size(rows), _by_cost(rows), _by_case(rows)] if single else []
     if len(single) < len(rows):
         tables.append(_pairs(rows))
     tables.append(_failures(rows))

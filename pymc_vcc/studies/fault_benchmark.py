@@ -123,6 +123,12 @@ SIZE_EDGES = (1.0, 1.75)
 diagnosis is scored apart (:func:`correct_by_size`): near the threshold (the benchmark's
 second severities and the condenser's first two cases, 1.1-1.6 times it) and well beyond it
 (its first severities, about twice or more)."""
+COST_EDGES = (0.05, 0.10)
+"""Where the bands of what a case's faults cost begin (the larger of the drops of capacity and
+of COP at the rating point, :func:`true_rating_change`; fraction), in which correct diagnosis
+is scored apart (:func:`correct_by_cost`); the cheaper faults form a band below the first.
+Yuill and Braun judge whether a case is faulted by its fault impact ratio, the capacity or COP
+with the fault over without it: 5 % is a ratio of 0.95."""
 PAIR_SCORES = (
     "correct diagnosis",
     "partial diagnosis",
@@ -163,6 +169,18 @@ class FaultBenchmarkResult:
                 f"{share:.2f} of {cases} at {size_band(low, high)} its threshold"
                 for low, high, cases, share in t["by_size"]
                 if cases
+            ),
+            *(
+                []
+                if t["by_cost"] is None
+                else [
+                    "correct diagnosis by what the fault costs at the rating point: "
+                    + "; ".join(
+                        f"{share:.2f} of {cases} at {cost_band(low, high)}"
+                        for low, high, cases, share in t["by_cost"]
+                        if cases
+                    )
+                ]
             ),
             f"severity error (median): {t['median_severity_error']:.2f} of the intensity; "
             f"intensity inside its 95 % interval: {t['intensity_coverage']:.2f}; the model's form "
@@ -213,6 +231,14 @@ def size_band(low: float, high: float) -> str:
     """A band of fault sizes (:func:`correct_by_size`) in words: ``1-1.75 times``, ``1.75
     times or more``."""
     return f"{low:g} times or more" if high == float("inf") else f"{low:g}-{high:g} times"
+
+
+def cost_band(low: float, high: float) -> str:
+    """A band of what faults cost (:func:`correct_by_cost`) in words: ``under 5 %``, ``5-10
+    %``, ``10 % or more``."""
+    if low == -float("inf"):
+        return f"under {100 * high:g} %"
+    return f"{100 * low:g} % or more" if high == float("inf") else f"{100 * low:g}-{100 * high:g} %"
 
 
 def _named(verdict: str) -> list[str]:
@@ -402,16 +428,53 @@ def correct_by_size(
         rows: the cases' rows as :func:`fault_benchmark` keeps them.
         edges: the bands' lower edges, increasing (:data:`SIZE_EDGES`).
     """
-    if any(high <= low for low, high in itertools.pairwise(edges)):
-        raise ValueError(f"size edges must increase, got {list(edges)}")
     sizes = [
         (row["true_intensity"] / _THRESHOLDS[row["fault"]], row["score"] == "correct diagnosis")
         for row in rows
         if isinstance(row["fault"], str)
     ]
+    return _named_in_bands(sizes, edges)
+
+
+def rating_drop(rating: dict[str, dict[str, float]]) -> float:
+    """What a case's faults truly cost at the rating point: the larger of the drops of the
+    rated quantities (a row's ``rating``; fraction of the rating, negative when both rose)."""
+    return max(-rating[name]["true"] for name in RATED)
+
+
+def correct_by_cost(
+    rows: Sequence[dict], edges: Sequence[float] = COST_EDGES
+) -> list[tuple[float, float, int, float]]:
+    """Correct diagnosis by what the fault costs at the rating point (:func:`rating_drop`): for
+    each band, below the first edge and from each edge to the next (the last open), its lower
+    and upper edge, its faulted cases and the share of them named correctly (nan without
+    cases). Only rows that keep the true cost count (:func:`with_true_rating_change` adds it to
+    older rows).
+
+    Args:
+        rows: the cases' rows as :func:`fault_benchmark` keeps them.
+        edges: the bands' lower edges after the first, increasing (:data:`COST_EDGES`).
+    """
+    costs = [
+        (rating_drop(row["rating"]), row["score"] == "correct diagnosis")
+        for row in rows
+        if isinstance(row["fault"], str)
+        and "rating" in row
+        and all(np.isfinite(row["rating"][name]["true"]) for name in RATED)
+    ]
+    return _named_in_bands(costs, [-float("inf"), *edges])
+
+
+def _named_in_bands(
+    cases: Sequence[tuple[float, bool]], edges: Sequence[float]
+) -> list[tuple[float, float, int, float]]:
+    """Of ``cases`` (a measure and whether the fault was named), per band from each of
+    ``edges`` to the next (the last open): its edges, its cases and the share named."""
+    if any(high <= low for low, high in itertools.pairwise(edges)):
+        raise ValueError(f"band edges must increase, got {list(edges)}")
     bands = []
     for low, high in zip(edges, [*edges[1:], float("inf")], strict=True):
-        named = [right for size, right in sizes if low <= size < high]
+        named = [right for measure, right in cases if low <= measure < high]
         share = statistics.fmean(named) if named else float("nan")
         bands.append((float(low), float(high), len(named), share))
     return bands
@@ -473,6 +536,38 @@ def _faulted(
     return moved, {
         name: float(faults[name].intensity(after, before, unit)[0]) for name in case_faults(case)
     }
+
+
+def _case_parameters(
+    unit: Unit, healthy: Truth, seed: int, n: int, case: Case
+) -> tuple[dict[str, float], dict[str, float]]:
+    """Unit ``seed``'s parameters in ``case``, its ``n``-th (a month's wear drawn by the seed
+    and ``n``), and each of the case's faults' true intensity (:func:`_faulted`)."""
+    worn = worn_parameters(unit, healthy.parameters, np.random.default_rng([seed, n]))
+    return _faulted(unit, healthy.parameters, worn, case)
+
+
+def with_true_rating_change(rows: Sequence[dict], solver: str = "cvode") -> list[dict]:
+    """The rows, each that lacks it with what its case truly cost at the rating point
+    (:func:`true_rating_change`, under ``rating`` as ``{quantity: {"true": change}}``),
+    computed again from its unit's seed and its case: rows written before rows kept it. Two
+    runs of the model at the rating inputs a row; the wear is drawn as the benchmark draws it
+    now."""
+    unit = load_unit()
+    labels = {case_label(case): n for n, case in enumerate(CASES)}
+    units: dict[tuple[str, int], Truth] = {}
+    again = []
+    for row in rows:
+        if "rating" not in row:
+            key = (row.get("variant", "all"), row["unit_seed"])
+            if key not in units:
+                units[key] = benchmark_unit(*key)
+            n = labels[row["case"]]
+            parameters, _ = _case_parameters(unit, units[key], key[1], n, CASES[n])
+            cost = true_rating_change(unit, units[key], parameters, solver)
+            row = row | {"rating": {name: {"true": change} for name, change in cost.items()}}
+        again.append(row)
+    return again
 
 
 def case_label(case: Case) -> str:
@@ -541,6 +636,7 @@ def summarise_cases(rows: Sequence[dict]) -> dict:
         "seconds": statistics.median(r["seconds"] for r in rows),
         "by_fault": by_fault,
         "by_size": correct_by_size(rows),
+        "by_cost": correct_by_cost(rows) if any("rating" in r for r in faulted) else None,
         "pairs": _summarise_pairs(pairs) if pairs else None,
     }
 
@@ -548,8 +644,9 @@ def summarise_cases(rows: Sequence[dict]) -> dict:
 def _summarise_rating(rows: Sequence[dict]) -> dict[str, dict[str, float]] | None:
     """Per rated quantity, of the rows that read it (:func:`true_rating_change`), the median
     error of the reading's mean (fraction of the rating) and the share of true changes inside
-    the 95 % intervals (a reading every run of which failed counts as not covering)."""
-    rated = [r["rating"] for r in rows if "rating" in r]
+    the 95 % intervals (a reading every run of which failed counts as not covering; rows with
+    only the true cost, :func:`with_true_rating_change`, do not count)."""
+    rated = [r["rating"] for r in rows if "rating" in r and "mean" in r["rating"][RATED[0]]]
     if not rated:
         return None
     summary = {}
@@ -681,8 +778,7 @@ def fault_benchmark(
                 if key in done:
                     continue
                 case_started = time.perf_counter()
-                worn = worn_parameters(unit, healthy.parameters, np.random.default_rng([seed, n]))
-                parameters, truths = _faulted(unit, healthy.parameters, worn, case)
+                parameters, truths = _case_parameters(unit, healthy, seed, n, case)
                 later = _logging(
                     record_again(healthy, seed + n + 1, parameters, later_seconds, later_start),
                     logged,
@@ -812,6 +908,7 @@ def _commissioned(healthy, seed, executor, settings, budget, coils, log, rounds)
 
 __all__ = [
     "CASES",
+    "COST_EDGES",
     "PAIR_SCORES",
     "SIZE_EDGES",
     "FaultBenchmarkResult",
@@ -820,12 +917,16 @@ __all__ = [
     "case_label",
     "check_outputs",
     "commission",
+    "correct_by_cost",
     "correct_by_size",
+    "cost_band",
     "fault_benchmark",
     "model_form_needed",
+    "rating_drop",
     "rescored",
     "score",
     "size_band",
     "summarise_cases",
     "unbiased_naming",
+    "with_true_rating_change",
 ]

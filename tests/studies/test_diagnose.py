@@ -382,8 +382,72 @@ def test_correct_diagnosis_is_scored_by_the_faults_size_in_thresholds():
     low, high, cases, share = correct_by_size(rows, (1.0, 1.55, 2.5))[1]
     assert (low, high, cases, share) == (1.55, 2.5, 2, 0.0)
     assert np.isnan(correct_by_size(rows[:1])[0][3])  # no faulted case
-    with pytest.raises(ValueError, match="size edges must increase"):
+    with pytest.raises(ValueError, match="band edges must increase"):
         correct_by_size(rows, (1.75, 1.0))
+
+
+def test_correct_diagnosis_is_scored_by_what_the_fault_costs():
+    """Bands of the larger drop of capacity and COP at the rating point; rows without the
+    true cost, with a failed one, or without a fault are in no band."""
+    from pymc_vcc.studies.fault_benchmark import (
+        FaultBenchmarkResult,
+        correct_by_cost,
+        cost_band,
+        rating_drop,
+        summarise_cases,
+    )
+
+    def row(fault, capacity, cop, score):
+        rating = {"capacity": {"true": capacity}, "COP": {"true": cop}}
+        return {"fault": fault, "true_intensity": 0.3, "score": score, "rating": rating,
+                "simulations": 1, "seconds": 1.0, "probabilities": {"undercharge": 0.0},
+                "severity_error": 0.1, "covered": True, "model_mean": 0.3,
+                "model_sd": 0.01}  # fmt: skip
+
+    leak, gas = "compressor valve leakage", "non-condensable gas"
+    rows = [
+        row(gas, 0.01, -0.02, "no response"),  # costs 2 % of the COP
+        row(gas, 0.02, 0.01, "correct diagnosis"),  # both rose: a drop of -1 %
+        row(leak, -0.07, -0.03, "correct diagnosis"),  # 7 % of the capacity
+        row(leak, -0.16, -0.11, "correct diagnosis"),
+        row(leak, -0.12, -0.08, "no response"),
+        row(None, -0.20, -0.20, "false alarm"),  # no fault
+        row(leak, float("nan"), -0.2, "correct diagnosis"),  # the truth's run failed
+    ]
+    assert rating_drop(rows[0]["rating"]) == pytest.approx(0.02)
+    assert rating_drop(rows[1]["rating"]) == pytest.approx(-0.01)
+    inf = float("inf")
+    assert correct_by_cost(rows) == [(-inf, 0.05, 2, 0.5), (0.05, 0.1, 1, 1.0), (0.1, inf, 2, 0.5)]
+    assert [cost_band(low, high) for low, high, *_ in correct_by_cost(rows)] == [
+        "under 5 %", "5-10 %", "10 % or more"
+    ]  # fmt: skip
+    assert correct_by_cost([*rows, {"fault": leak, "score": "no response"}])[0][2] == 2
+    table = summarise_cases(rows)
+    assert table["by_cost"] == correct_by_cost(rows)
+    printed = FaultBenchmarkResult(rows, table).format_table()
+    assert "by what the fault costs at the rating point: 0.50 of 2 at under 5 %; 1.00 of 1" in (
+        printed
+    )
+    without = [{k: v for k, v in r.items() if k != "rating"} for r in rows]
+    assert summarise_cases(without)["by_cost"] is None
+    assert "costs" not in FaultBenchmarkResult(without, summarise_cases(without)).format_table()
+
+
+def test_rows_written_before_rows_kept_the_cost_get_it_computed_again():
+    """From the unit's seed and the case: a valve leak of 25 % costs a tenth or more of the
+    rating (11-17 % on 29 benchmark units); the unit as it was, its wear only (under 1 %); a
+    row that keeps its cost is left as it is."""
+    from pymc_vcc.studies.fault_benchmark import rating_drop, with_true_rating_change
+
+    def row(case):
+        return {"case": case, "unit_seed": 9300, "variant": "all", "score": "correct"}
+
+    kept = row("None: {}") | {"rating": {"capacity": {"true": 0.5}, "COP": {"true": 0.5}}}
+    rows = [row("None: {}"), row('compressor valve leakage: {"F_LEAK": 0.25}'), kept]
+    healthy, leaking, again = with_true_rating_change(rows)
+    assert abs(rating_drop(healthy["rating"])) < 0.01
+    assert rating_drop(leaking["rating"]) > 0.10
+    assert again is kept and leaking["score"] == "correct" and "rating" not in rows[1]
 
 
 def test_score_table_counts_rates_among_healthy_and_faulted_cases():
