@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import statistics
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from pymc_vcc.studies.diagnose import NAMED, RATED
@@ -92,26 +93,24 @@ def _summary(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _by_size(rows: list[dict]) -> str:
-    lines = [
-        "| the fault's size, in thresholds | faulted cases | correct diagnosis |",
-        "|---|---:|---:|",
-    ]
-    for low, high, cases, share in correct_by_size(rows):
+def _bands(
+    heading: str, bands: list[tuple[float, float, int, float]], words: Callable[[float, float], str]
+) -> str:
+    """A table of correct diagnosis per band (``words`` names a band by its edges)."""
+    lines = [f"| {heading} | faulted cases | correct diagnosis |", "|---|---:|---:|"]
+    for low, high, cases, share in bands:
         named = f"{round(share * cases)} ({100 * share:.0f} %)" if cases else "—"
-        lines.append(f"| {size_band(low, high)} | {cases} | {named} |")
+        lines.append(f"| {words(low, high)} | {cases} | {named} |")
     return "\n".join(lines)
+
+
+def _by_size(rows: list[dict]) -> str:
+    return _bands("the fault's size, in thresholds", correct_by_size(rows), size_band)
 
 
 def _by_cost(rows: list[dict]) -> str:
-    lines = [
-        "| what the fault costs at the rating point | faulted cases | correct diagnosis |",
-        "|---|---:|---:|",
-    ]
-    for low, high, cases, share in correct_by_cost(with_true_rating_change(rows)):
-        named = f"{round(share * cases)} ({100 * share:.0f} %)" if cases else "—"
-        lines.append(f"| {cost_band(low, high)} | {cases} | {named} |")
-    return "\n".join(lines)
+    bands = correct_by_cost(with_true_rating_change(rows))
+    return _bands("what the fault costs at the rating point", bands, cost_band)
 
 
 def _by_case(rows: list[dict]) -> str:

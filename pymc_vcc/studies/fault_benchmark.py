@@ -550,11 +550,14 @@ def _case_parameters(
 def with_true_rating_change(rows: Sequence[dict], solver: str = "cvode") -> list[dict]:
     """The rows, each that lacks it with what its case truly cost at the rating point
     (:func:`true_rating_change`, under ``rating`` as ``{quantity: {"true": change}}``),
-    computed again from its unit's seed and its case: rows written before rows kept it. Two
-    runs of the model at the rating inputs a row; the wear is drawn as the benchmark draws it
-    now."""
+    computed again from its unit's seed and its case (one of :data:`CASES`): rows written
+    before rows kept it. Two runs of the model at the rating inputs a row; the wear is drawn as
+    the benchmark draws it now."""
     unit = load_unit()
     labels = {case_label(case): n for n, case in enumerate(CASES)}
+    unknown = sorted({r["case"] for r in rows if "rating" not in r and r["case"] not in labels})
+    if unknown:
+        raise ValueError(f"rows of unknown case(s) {unknown}; the benchmark's cases are CASES")
     units: dict[tuple[str, int], Truth] = {}
     again = []
     for row in rows:

@@ -448,6 +448,8 @@ def test_rows_written_before_rows_kept_the_cost_get_it_computed_again():
     assert abs(rating_drop(healthy["rating"])) < 0.01
     assert rating_drop(leaking["rating"]) > 0.10
     assert again is kept and leaking["score"] == "correct" and "rating" not in rows[1]
+    with pytest.raises(ValueError, match="unknown case"):
+        with_true_rating_change([row('undercharge: {"M0": -0.4}')])
 
 
 def test_score_table_counts_rates_among_healthy_and_faulted_cases():
