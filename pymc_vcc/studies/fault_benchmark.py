@@ -34,7 +34,7 @@ import itertools
 import json
 import statistics
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -164,22 +164,14 @@ class FaultBenchmarkResult:
             f"correct diagnosis: {t['correct_rate']:.2f} of the cases of one fault; misdiagnosis "
             f"{t['misdiagnosis_rate']:.2f}, missed detection {t['missed_rate']:.2f}, no response "
             f"{t['no_response_rate']:.2f}",
-            "correct diagnosis by the fault's size: "
-            + "; ".join(
-                f"{share:.2f} of {cases} at {size_band(low, high)} its threshold"
-                for low, high, cases, share in t["by_size"]
-                if cases
+            _bands_line(
+                "the fault's size", t["by_size"], lambda *b: f"{size_band(*b)} its threshold"
             ),
             *(
                 []
                 if t["by_cost"] is None
                 else [
-                    "correct diagnosis by what the fault costs at the rating point: "
-                    + "; ".join(
-                        f"{share:.2f} of {cases} at {cost_band(low, high)}"
-                        for low, high, cases, share in t["by_cost"]
-                        if cases
-                    )
+                    _bands_line("what the fault costs at the rating point", t["by_cost"], cost_band)
                 ]
             ),
             f"severity error (median): {t['median_severity_error']:.2f} of the intensity; "
@@ -200,6 +192,19 @@ class FaultBenchmarkResult:
                 f"{row['severity_error']:>14.2f}  {row['covered']:>7.2f}"
             )
         return "\n".join(lines)
+
+
+def _bands_line(
+    measure: str, bands: Sequence[tuple[float, float, int, float]], words: Callable[..., str]
+) -> str:
+    """Correct diagnosis by band of ``measure`` (:func:`correct_by_size`,
+    :func:`correct_by_cost`; ``words`` names a band by its edges), as ``pymc-vcc validate
+    --faults`` prints it."""
+    return f"correct diagnosis by {measure}: " + "; ".join(
+        f"{share:.2f} of {cases} at {words(low, high)}"
+        for low, high, cases, share in bands
+        if cases
+    )
 
 
 def _pairs_line(pairs: dict) -> str:
