@@ -104,6 +104,7 @@ def _diagnose(args: argparse.Namespace) -> int:
         fault_probability=args.fault_probability,
         model_form=args.model_form,
         named=args.named,
+        likely=args.likely,
     )
     n_simulations = int(result.tree["sample_stats"]["n_simulations"])
     return _report(
@@ -320,6 +321,16 @@ def _bench(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(results))
     return 0
+
+
+def _number_or_off(text: str) -> float | None:
+    """An argparse type: a number, or ``off`` (None)."""
+    if text.strip().lower() == "off":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number or 'off', got {text!r}") from None
 
 
 def _positive(kind: type[int] | type[float]) -> Callable[[str], int | float]:
@@ -728,7 +739,7 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="the folder (or posterior.nc) written by `pymc-vcc calibrate` at commissioning",
     )
-    from pymc_vcc.studies.diagnose import NAMED, POSSIBLE, ROUNDS
+    from pymc_vcc.studies.diagnose import LIKELY, NAMED, POSSIBLE, RIVAL, ROUNDS
     from pymc_vcc.studies.faults import FAULT_PROBABILITY, MODEL_FORM
 
     diagnose.add_argument(
@@ -754,6 +765,15 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"the probability beyond its threshold that names a fault, in [{POSSIBLE}, 1) "
         f"(default {NAMED}; lower names more faults near their thresholds, for more false "
         "alarms)",
+    )
+    diagnose.add_argument(
+        "--likely",
+        type=_number_or_off,
+        default=LIKELY,
+        metavar="P",
+        help="when no fault reaches --named, name the likeliest as likely if its probability "
+        f"is at least P and no other fault's reaches {RIVAL}; P in [{POSSIBLE}, --named], or "
+        f"off (default {'off' if LIKELY is None else LIKELY})",
     )
     _add_study_options(diagnose, "results/diagnose", "small")
     _add_record_options(diagnose, rounds=ROUNDS)

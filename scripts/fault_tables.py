@@ -11,7 +11,8 @@ true cost, computed again: :func:`~pymc_vcc.studies.fault_benchmark.with_true_ra
 20 ms a row), the scores of each case (of the cases of two faults at once apart), the cases not
 diagnosed correctly or whose interval misses, what the units truly lost at their rating point beside
 the diagnosis's reading of it (rows that keep it), and what the verdicts would have scored at other
-naming probabilities (:func:`~pymc_vcc.studies.fault_benchmark.rescored`), beside what a reading
+naming probabilities, or with a fault no other rivals named as likely
+(:func:`~pymc_vcc.studies.fault_benchmark.rescored`), beside what a reading
 without bias would have named (:func:`~pymc_vcc.studies.fault_benchmark.unbiased_naming`, for rows
 that keep the readings).
 """
@@ -24,7 +25,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from pymc_vcc.studies.diagnose import NAMED, RATED
+from pymc_vcc.studies.diagnose import LIKELY, NAMED, RATED
 from pymc_vcc.studies.fault_benchmark import (
     CASES,
     PAIR_SCORES,
@@ -43,6 +44,7 @@ from pymc_vcc.studies.faults import FAULTS
 CATEGORIES = ("false alarm", "misdiagnosis", "missed detection", "no response")
 SHOWN_PROBABILITY = 0.1  # the probabilities a failed case lists
 NAMING_PROBABILITIES = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)  # the trade-off table's rows
+LIKELY_PROBABILITIES = (0.5, 0.6, 0.7)  # its rows naming a fault no other rivals, at 0.9
 TRADE_OFF_RATES = (  # the trade-off table's columns, keys of the score table
     "false_alarm_rate",
     "correct_rate",
@@ -225,13 +227,17 @@ def _trade_off(rows: list[dict]) -> str:
         "detection | no response |" + (" named if read without bias |" if widths else ""),
         "|---:|---:|---:|---:|---:|---:|" + ("---:|" if widths else ""),
     ]
-    for named in NAMING_PROBABILITIES:
-        t = summarise_cases(rescored(rows, named))
-        rates = [t[key] for key in TRADE_OFF_RATES]
+    rules: list[tuple[float, float | None]] = [(named, None) for named in NAMING_PROBABILITIES]
+    rules += [(NAMED, likely) for likely in LIKELY_PROBABILITIES]
+    for named, likely in rules:
+        t = summarise_cases(rescored(rows, named, likely=likely))
+        cells = [f"{100 * t[key]:.0f} %" for key in TRADE_OFF_RATES]
         if widths:
-            rates.append(unbiased_naming(rows, named))
-        mark = f"**{named}** (default)" if named == NAMED else f"{named}"
-        lines.append(f"| {mark} | " + " | ".join(f"{100 * r:.0f} %" for r in rates) + " |")
+            unbiased = unbiased_naming(rows, named) if likely is None else None
+            cells.append("—" if unbiased is None else f"{100 * unbiased:.0f} %")
+        rule = f"{named}" if likely is None else f"{named}, likely at {likely}"
+        mark = f"**{rule}** (default)" if (named, likely) == (NAMED, LIKELY) else rule
+        lines.append(f"| {mark} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

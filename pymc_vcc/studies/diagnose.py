@@ -63,6 +63,14 @@ NAMED = 0.9
 least this (``pymc-vcc diagnose --named``)."""
 POSSIBLE = 0.5
 """Below the naming probability and at least this, a fault is reported as possible."""
+LIKELY: float | None = None
+"""The probability that names a fault as likely when none reaches the naming probability and
+no other fault rivals it (each under :data:`RIVAL`), ``pymc-vcc diagnose --likely``; None:
+faults are named only at the naming probability."""
+RIVAL = 0.2
+"""A fault at this probability or more rivals another: neither is named as likely."""
+LIKELY_PREFIX = "likely: "
+"""How a verdict names a fault as likely (:func:`verdict`)."""
 ROUNDS = 2
 """Calibrations of a later record in turn (``pymc-vcc diagnose --rounds``): the second with
 half of the model's error drawn at the first's posterior, the faulted unit, and half, as the
@@ -84,10 +92,16 @@ spread each case needed: 0.011 for the capacity, 0.012 for the COP."""
 RATING_COPIES = 16  # form-error draws per posterior draw (:func:`with_rating_form`)
 
 
-def check_named(named: float) -> None:
-    """Refuse a naming probability outside [:data:`POSSIBLE`, 1), in one line."""
+def check_named(named: float, likely: float | None = None) -> None:
+    """Refuse a naming probability outside [:data:`POSSIBLE`, 1), or a likely one outside
+    [:data:`POSSIBLE`, ``named``], in one line."""
     if not POSSIBLE <= named < 1.0:
         raise ValueError(f"naming probability must lie in [{POSSIBLE}, 1), got {named}")
+    if likely is not None and not POSSIBLE <= likely <= named:
+        raise ValueError(
+            f"likely probability must lie in [{POSSIBLE}, {named:g}] (the naming probability), "
+            f"got {likely}"
+        )
 
 
 @dataclass
@@ -112,6 +126,7 @@ class Diagnosis:
             its form error.
         model_form: the form error's relative sd in :attr:`intensities`.
         named: the probability that named a fault in :attr:`verdict`.
+        likely: the probability that names a fault no other rivals as likely (None: off).
         rating: what the faults cost at the rating point: ``"capacity"`` and ``"COP"`` ->
             draws of their relative changes with the faults undone, the model's error there
             included (:func:`with_rating_form`).
@@ -130,6 +145,7 @@ class Diagnosis:
     model_intensities: dict[str, np.ndarray] = field(default_factory=dict)
     model_form: float = 0.0
     named: float = NAMED
+    likely: float | None = None
     rating: dict[str, np.ndarray] = field(default_factory=dict)
     model_rating: dict[str, np.ndarray] = field(default_factory=dict)
     rating_failed: int = 0
@@ -158,6 +174,7 @@ class Diagnosis:
             "commissioning_unreproduced": self.unreproduced,
             "model_form": self.model_form,
             "named_at": self.named,
+            "likely_at": self.likely,
             "rating_change": {
                 name: _interval(changes) for name, changes in self.rating.items() if changes.size
             },
@@ -183,7 +200,7 @@ class Diagnosis:
         charge = self.tree["posterior"][CHARGE].values.ravel() - self.commissioned[CHARGE]
         low, high = np.quantile(charge, [0.025, 0.975])
         lines = [
-            f"verdict: {self.verdict} (a fault is named at P(fault) >= {self.named:g})",
+            f"verdict: {self.verdict} ({self._naming_rule()})",
             f"charge change since commissioning: {charge.mean():+.3f} kg "
             f"(95 % interval {low:+.3f} to {high:+.3f} kg)",
             self._rating_line(),
@@ -211,6 +228,13 @@ class Diagnosis:
         if self.unreproduced:
             lines.append(f"\n{_misfit_caution(self.unreproduced)}")
         return "\n".join(lines)
+
+    def _naming_rule(self) -> str:
+        """The report's words for when a fault is named."""
+        rule = f"a fault is named at P(fault) >= {self.named:g}"
+        if self.likely is None:
+            return rule
+        return f"{rule}, or as likely at >= {self.likely:g} when no other is at {RIVAL:g}"
 
     def _rating_line(self) -> str:
         """The report's line on what the faults cost at the rating point."""
@@ -251,7 +275,7 @@ def _misfit_caution(outputs: Sequence[str]) -> str:
 
 
 def verdict(
-    probabilities: Mapping[str, float], named: float = NAMED
+    probabilities: Mapping[str, float], named: float = NAMED, likely: float | None = LIKELY
 ) -> tuple[str, list[tuple[str, str]]]:
     """The verdict from each fault's probability, and the pairs it could not separate: two
     faults neither of which reaches ``named`` but whose probabilities together do.
@@ -260,13 +284,23 @@ def verdict(
         probabilities: fault name -> P(intensity beyond its threshold).
         named: the probability that names a fault (:data:`NAMED`; lower names more faults
             near their thresholds for more false alarms and misdiagnoses).
+        likely: the probability that names the likeliest fault as likely when none reaches
+            ``named`` and every other is under :data:`RIVAL` (:data:`LIKELY`; None: never).
     """
-    check_named(named)
+    check_named(named, likely)
     sure = [name for name, p in probabilities.items() if p >= named]
     if len(sure) > 1:
         return "several: " + ", ".join(sure), []
     if len(sure) == 1:
         return sure[0], []
+    likeliest = max(probabilities, key=probabilities.__getitem__, default=None)
+    if (
+        likely is not None
+        and likeliest is not None
+        and probabilities[likeliest] >= likely
+        and all(p < RIVAL for name, p in probabilities.items() if name != likeliest)
+    ):
+        return LIKELY_PREFIX + likeliest, []
     pairs = [
         (a, b)
         for a, b in itertools.combinations(probabilities, 2)
@@ -428,6 +462,7 @@ def diagnose(
     fault_probability: float = FAULT_PROBABILITY,
     model_form: float = MODEL_FORM,
     named: float = NAMED,
+    likely: float | None = LIKELY,
 ) -> Diagnosis:
     """Diagnose a later record of a unit against its commissioning posterior.
 
@@ -450,11 +485,12 @@ def diagnose(
             (:func:`~pymc_vcc.studies.unit_log.later_prior`).
         model_form: the relative sd of the model's reading of an intensity
             (:data:`~pymc_vcc.studies.faults.MODEL_FORM`; 0: the model's reading alone).
-        named: the probability that names a fault (:func:`verdict`).
+        named, likely: the probabilities that name a fault, and a fault no other rivals as
+            likely (:func:`verdict`).
     """
     check_fault_probability(fault_probability)
     check_model_form(model_form)
-    check_named(named)
+    check_named(named, likely)
     unit = load_unit() if unit is None else unit
     if budget not in RECORD_BUDGETS:
         raise ValueError(f"budget {budget!r}: a diagnosis takes {list(RECORD_BUDGETS)}")
@@ -495,7 +531,7 @@ def diagnose(
     probabilities = {
         f.name: beyond_probability(read[f.name], f.threshold, model_form) for f in FAULTS
     }
-    text, pairs = verdict(probabilities, named)
+    text, pairs = verdict(probabilities, named, likely)
     model_rating, rating_failed = rating_change(samples, posterior, unit, seed, solver)
     by_name = {f.name: f for f in FAULTS}
     point = {name: float(values.mean()) for name, values in samples.items()}
@@ -532,6 +568,7 @@ def diagnose(
         model_intensities=read,
         model_form=model_form,
         named=named,
+        likely=likely,
         rating=with_rating_form(model_rating, seed),
         model_rating=model_rating,
         rating_failed=rating_failed,
@@ -552,6 +589,7 @@ def diagnose_study(
     fault_probability: float = FAULT_PROBABILITY,
     model_form: float = MODEL_FORM,
     named: float = NAMED,
+    likely: float | None = LIKELY,
 ) -> Diagnosis:
     """``pymc-vcc diagnose LOG --prior COMMISSIONING``: load and check the log and the
     commissioning posterior before any simulation, diagnose, and write the posterior, the
@@ -563,7 +601,7 @@ def diagnose_study(
         commissioning: the folder (or ``posterior.nc``) of the healthy unit's calibration.
         column_map: the log's column map (default: ``LOG.columns.toml`` beside it).
         unit: the unit description (default: the built-in split unit).
-        drift, coils, rounds, method, fault_probability, model_form, named: as for
+        drift, coils, rounds, method, fault_probability, model_form, named, likely: as for
             :func:`diagnose`.
     """
     from pymc_vcc.io.measurements import load_log
@@ -580,7 +618,7 @@ def diagnose_study(
     check_drift(drift)
     check_fault_probability(fault_probability)
     check_model_form(model_form)
-    check_named(named)
+    check_named(named, likely)
     budget = record_budget_name(settings)
     unit = unit or load_unit()
     measured = load_log(log, column_map, dt=OUTPUT_INTERVAL)
@@ -602,6 +640,7 @@ def diagnose_study(
             fault_probability=fault_probability,
             model_form=model_form,
             named=named,
+            likely=likely,
         )
         if settings.out is not None:
             write_netcdf(result.tree, settings.out / POSTERIOR_FILE)
@@ -613,8 +652,11 @@ def diagnose_study(
 
 __all__ = [
     "FAULTS",
+    "LIKELY",
+    "LIKELY_PREFIX",
     "NAMED",
     "POSSIBLE",
+    "RIVAL",
     "ROUNDS",
     "Diagnosis",
     "Fault",

@@ -10,9 +10,10 @@ each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A cas
 
 * no-fault cases (none, or a change below its fault's threshold): ``false alarm`` when a fault
   is named or two are not distinguishable, else ``correct``;
-* faulted cases: ``correct diagnosis`` when the fault is named, ``misdiagnosis`` when another
-  is, ``missed detection`` on ``no fault``, ``no response`` when the verdict names none for
-  sure (two faults not distinguishable, or only possible ones); with two faults at once,
+* faulted cases: ``correct diagnosis`` when the fault is named (for sure or as likely),
+  ``misdiagnosis`` when another is, ``missed detection`` on ``no fault``, ``no response`` when
+  the verdict names none (two faults not distinguishable, or only possible ones); with two
+  faults at once,
   ``correct diagnosis`` when both are named and ``partial diagnosis`` when one is, alone
   (scored apart from the cases of one fault);
 
@@ -46,7 +47,7 @@ from pymc_vcc.physics.inputs import builtin_inputs
 from pymc_vcc.physics.simulate import operating_point
 from pymc_vcc.physics.unit import Unit, load_unit
 from pymc_vcc.studies.common import StudySettings, holds_output_folder, write_json, write_text
-from pymc_vcc.studies.diagnose import RATED, ROUNDS, diagnose, verdict
+from pymc_vcc.studies.diagnose import LIKELY_PREFIX, RATED, ROUNDS, diagnose, verdict
 from pymc_vcc.studies.faults import FAULTS, MODEL_FORM, beyond_probability, moved_parameters
 from pymc_vcc.studies.truths import (
     RECORD_SECONDS,
@@ -247,10 +248,11 @@ def cost_band(low: float, high: float) -> str:
 
 
 def _named(verdict: str) -> list[str]:
-    """The faults a verdict names for sure."""
+    """The faults a verdict names, for sure or as likely."""
     if verdict.startswith("several: "):
         return verdict.removeprefix("several: ").split(", ")
-    return [verdict] if verdict in {f.name for f in FAULTS} else []
+    fault = verdict.removeprefix(LIKELY_PREFIX)
+    return [fault] if fault in {f.name for f in FAULTS} else []
 
 
 def score(fault: str | Sequence[str] | None, verdict: str) -> str:
@@ -275,9 +277,15 @@ def score(fault: str | Sequence[str] | None, verdict: str) -> str:
     return "partial diagnosis" if named else "no response"
 
 
-def rescored(rows: Sequence[dict], named: float, model_form: float | None = None) -> list[dict]:
+def rescored(
+    rows: Sequence[dict],
+    named: float,
+    model_form: float | None = None,
+    likely: float | None = None,
+) -> list[dict]:
     """The cases' rows with the verdict and score each would have had at another naming
-    probability (:func:`~pymc_vcc.studies.diagnose.verdict`) and, given ``model_form``, at
+    probability (:func:`~pymc_vcc.studies.diagnose.verdict`; ``likely`` names a fault no
+    other rivals, None: off) and, given ``model_form``, at
     another form error (the probabilities computed again from the rows' ``model_reads``,
     :func:`~pymc_vcc.studies.faults.beyond_probability`): a benchmark's trade-offs, read without
     diagnosing again.
@@ -297,7 +305,7 @@ def rescored(rows: Sequence[dict], named: float, model_form: float | None = None
                 name: beyond_probability(np.array(reads), _THRESHOLDS[name], model_form)
                 for name, reads in row["model_reads"].items()
             }
-        text, _ = verdict(probabilities, named)
+        text, _ = verdict(probabilities, named, likely)
         again.append(
             row
             | {"probabilities": probabilities, "verdict": text, "score": score(row["fault"], text)}

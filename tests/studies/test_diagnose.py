@@ -203,6 +203,43 @@ def test_a_lower_naming_probability_names_a_fault_nearer_its_threshold():
     assert verdict(quiet | {"a": 0.4, "b": 0.35}, named=0.9) == ("no fault", [])
 
 
+def test_a_fault_no_other_rivals_is_named_as_likely_from_the_likely_probability():
+    """Likely at 0.5: a sole fault at 0.6 is named as likely, not at 0.45, not beside a rival at
+    0.2 (nor a pair, neither sure); a fault at 0.9 is named for sure; off, it is only possible."""
+    from pymc_vcc.studies.diagnose import LIKELY_PREFIX, RIVAL
+
+    quiet = dict.fromkeys(("a", "b", "c"), 0.01)
+    assert verdict(quiet | {"a": 0.6}, likely=0.5) == (LIKELY_PREFIX + "a", [])
+    assert verdict(quiet | {"c": 0.5}, likely=0.5) == (LIKELY_PREFIX + "c", [])
+    assert verdict(quiet | {"a": 0.45}, likely=0.5) == ("no fault", [])
+    rivalled = quiet | {"a": 0.6, "b": RIVAL}
+    assert verdict(rivalled, likely=0.5) == ("no fault named; possible: a", [])
+    assert verdict(quiet | {"a": 0.6, "b": 0.19}, likely=0.5)[0] == LIKELY_PREFIX + "a"
+    assert verdict(quiet | {"a": 0.75, "b": 0.15}, likely=0.5)[0] == LIKELY_PREFIX + "a"
+    assert verdict(quiet | {"a": 0.75, "b": 0.15}, likely=None)[1] == [("a", "b")]
+    assert verdict(quiet | {"a": 0.95}, likely=0.5) == ("a", [])
+    assert verdict(quiet | {"a": 0.6}, likely=None) == ("no fault named; possible: a", [])
+    assert verdict(quiet | {"a": 0.6}, named=0.7, likely=0.7) == ("no fault named; possible: a", [])
+
+
+def test_a_likely_probability_outside_its_range_is_refused_through_the_cli(tmp_path, capsys):
+    from pymc_vcc.cli import main
+
+    for likely, named in (("0.4", "0.9"), ("0.95", "0.9"), ("0.8", "0.75")):
+        code = main(["diagnose", "no-such.csv", "--prior", "none", "--likely", likely,
+                     "--named", named, "--out", str(tmp_path / "d")])  # fmt: skip
+        err = capsys.readouterr().err.strip()
+        assert code != 0 and f"likely probability must lie in [0.5, {named}]" in err
+        assert f"got {float(likely)}" in err
+        assert len(err.splitlines()) == 1 and not (tmp_path / "d").exists()
+    code = main(["diagnose", "no-such.csv", "--prior", "none", "--likely", "OFF", "--named", "0.3"])
+    assert code != 0 and "naming probability must lie" in capsys.readouterr().err  # off parsed
+    with pytest.raises(SystemExit) as exit_info:
+        main(["diagnose", "no-such.csv", "--prior", "none", "--likely", "often"])
+    assert exit_info.value.code != 0
+    assert "--likely: must be a number or 'off', got 'often'" in capsys.readouterr().err
+
+
 def test_a_naming_probability_outside_its_range_is_refused_through_the_cli(tmp_path, capsys):
     from pymc_vcc.cli import main
 
@@ -323,6 +360,25 @@ def test_rows_are_scored_again_at_another_naming_probability():
         0.5: ["correct diagnosis", "false alarm"],
     }
     assert rows[0]["score"] == ""  # the rows themselves are left as they were
+
+
+def test_rows_are_scored_again_with_a_likely_fault_named():
+    """A gas at 0.8 with nothing else near: possible at 0.9 (no response), named as likely at
+    0.5 (correct); a healthy record reading gas at 0.6 is then a false alarm, and a valve leak
+    read as likely gas a misdiagnosis."""
+    from pymc_vcc.studies.fault_benchmark import rescored
+
+    gas, leak = "non-condensable gas", "compressor valve leakage"
+    quiet = {leak: 0.01}
+    rows = [
+        {"fault": gas, "probabilities": quiet | {gas: 0.8}},
+        {"fault": None, "probabilities": quiet | {gas: 0.6}},
+        {"fault": leak, "probabilities": quiet | {gas: 0.6}},
+    ]
+    assert [r["score"] for r in rescored(rows, 0.9)] == ["no response", "correct", "no response"]
+    likely = rescored(rows, 0.9, likely=0.5)
+    assert [r["verdict"] for r in likely] == [f"likely: {gas}"] * 3
+    assert [r["score"] for r in likely] == ["correct diagnosis", "false alarm", "misdiagnosis"]
 
 
 def test_rows_are_scored_again_at_another_form_error_from_the_models_reads():
