@@ -234,7 +234,7 @@ class Diagnosis:
         rule = f"a fault is named at P(fault) >= {self.named:g}"
         if self.likely is None:
             return rule
-        return f"{rule}, or as likely at >= {self.likely:g} when no other is at {RIVAL:g}"
+        return f"{rule}, or as likely at >= {self.likely:g} when no other reaches {RIVAL:g}"
 
     def _rating_line(self) -> str:
         """The report's line on what the faults cost at the rating point."""

@@ -291,6 +291,14 @@ def test_a_commissioning_the_model_missed_is_named_in_the_report():
     assert line in diagnosis.format_table() and "1 draw(s) failed" in diagnosis.format_table()
     assert diagnosis.summary()["rating_change"]["COP"]["mean"] == pytest.approx(-0.06)
     assert "(the model's error there included, ±1.2 points, 1 sd)" in diagnosis.format_table()
+    first = "verdict: no fault (a fault is named at P(fault) >= 0.9)"
+    assert diagnosis.format_table().splitlines()[0] == first
+    diagnosis.likely = 0.6
+    assert diagnosis.format_table().splitlines()[0] == (
+        "verdict: no fault (a fault is named at P(fault) >= 0.9, or as likely at >= 0.6 when no "
+        "other reaches 0.2)"
+    )
+    assert diagnosis.summary()["likely_at"] == 0.6
 
 
 def test_the_cost_at_the_rating_point_is_spread_by_the_models_error_there():
