@@ -3,7 +3,8 @@
 ``pymc-vcc validate --faults all --out DIR`` appends one JSON row per case to
 ``DIR/checkpoints/validate-faults.jsonl``; the measured rows behind the docs are kept in
 ``docs/results/runs/``. Run ``.venv/bin/python scripts/fault_tables.py ROWS.jsonl [MORE.jsonl ...]``
-(several runs' rows are pooled): the score
+(several runs' rows are pooled; ``--likely P`` scores them again first with a fault no other
+rivals named as likely at P): the score
 (:func:`~pymc_vcc.studies.fault_benchmark.summarise_cases`), correct diagnosis by the fault's size
 (:func:`~pymc_vcc.studies.fault_benchmark.correct_by_size`) and by what it costs at the rating point
 (:func:`~pymc_vcc.studies.fault_benchmark.correct_by_cost`; for rows written before rows kept the
@@ -19,6 +20,7 @@ that keep the readings).
 
 from __future__ import annotations
 
+import argparse
 import json
 import statistics
 import sys
@@ -241,8 +243,19 @@ def _trade_off(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def main(paths: list[str]) -> None:
-    rows = [json.loads(line) for path in paths for line in Path(path).read_text().splitlines()]
+def main(argv: list[str]) -> None:
+    parser = argparse.ArgumentParser(description="Markdown tables of fault benchmark rows.")
+    parser.add_argument("rows", nargs="+", metavar="ROWS.jsonl", help="rows of one or more runs")
+    parser.add_argument(
+        "--likely",
+        type=float,
+        metavar="P",
+        help="score every row again first, a fault no other rivals named as likely at P",
+    )
+    args = parser.parse_args(argv)
+    rows = [json.loads(line) for path in args.rows for line in Path(path).read_text().splitlines()]
+    if args.likely is not None:
+        rows = rescored(rows, NAMED, likely=args.likely)
     single = [r for r in rows if not isinstance(r["fault"], list)]
     tables = [_summary(rows), _by_size(rows), _by_cost(rows), _by_case(rows)] if single else []
     if len(single) < len(rows):
