@@ -9,7 +9,8 @@ non-condensable gas, leaking compressor valves, added near 0). Each fault of
 posterior draw (:func:`~pymc_vcc.studies.faults.fault_intensities`), spread by the model's form
 error (:func:`~pymc_vcc.studies.faults.with_model_form`). Its posterior probability of lying
 beyond the fault's threshold, the form error integrated out
-(:func:`~pymc_vcc.studies.faults.beyond_probability`), names it (:data:`NAMED`); two faults
+(:func:`~pymc_vcc.studies.faults.beyond_probability`), names it (:data:`NAMED`; or, on request,
+as likely when no other fault rivals it: :data:`LIKELY`); two faults
 that together are likely but neither alone are reported as not distinguishable, with the
 sensor that would tell them apart (:func:`separating_sensor`).
 

@@ -13,9 +13,8 @@ each later record diagnosed (:func:`~pymc_vcc.studies.diagnose.diagnose`). A cas
 * faulted cases: ``correct diagnosis`` when the fault is named (for sure or as likely),
   ``misdiagnosis`` when another is, ``missed detection`` on ``no fault``, ``no response`` when
   the verdict names none (two faults not distinguishable, or only possible ones); with two
-  faults at once,
-  ``correct diagnosis`` when both are named and ``partial diagnosis`` when one is, alone
-  (scored apart from the cases of one fault);
+  faults at once, ``correct diagnosis`` when both are named and ``partial diagnosis`` when one
+  is, alone (scored apart from the cases of one fault);
 
 with the severity error (|posterior mean intensity − true intensity| / true intensity) and
 whether the 95 % interval of the intensity covers the truth; the model's own reading (before
