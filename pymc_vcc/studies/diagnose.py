@@ -294,14 +294,11 @@ def verdict(
         return "several: " + ", ".join(sure), []
     if len(sure) == 1:
         return sure[0], []
-    likeliest = max(probabilities, key=probabilities.__getitem__, default=None)
-    if (
-        likely is not None
-        and likeliest is not None
-        and probabilities[likeliest] >= likely
-        and all(p < RIVAL for name, p in probabilities.items() if name != likeliest)
-    ):
-        return LIKELY_PREFIX + likeliest, []
+    if likely is not None and probabilities:
+        likeliest = max(probabilities, key=probabilities.__getitem__)
+        rivals = [p for name, p in probabilities.items() if name != likeliest]
+        if probabilities[likeliest] >= likely and max(rivals, default=0.0) < RIVAL:
+            return LIKELY_PREFIX + likeliest, []
     pairs = [
         (a, b)
         for a, b in itertools.combinations(probabilities, 2)

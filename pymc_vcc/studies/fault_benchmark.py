@@ -283,8 +283,7 @@ def rescored(
     likely: float | None = None,
 ) -> list[dict]:
     """The cases' rows with the verdict and score each would have had at another naming
-    probability (:func:`~pymc_vcc.studies.diagnose.verdict`; ``likely`` names a fault no
-    other rivals, None: off) and, given ``model_form``, at
+    probability (:func:`~pymc_vcc.studies.diagnose.verdict`) and, given ``model_form``, at
     another form error (the probabilities computed again from the rows' ``model_reads``,
     :func:`~pymc_vcc.studies.faults.beyond_probability`): a benchmark's trade-offs, read without
     diagnosing again.
@@ -293,6 +292,7 @@ def rescored(
         rows: the cases' rows as :func:`fault_benchmark` keeps them.
         named: the naming probability.
         model_form: the form error's relative sd (None: the rows' own probabilities).
+        likely: the probability that names a fault no other rivals as likely (None: off).
     """
     again = []
     for row in rows:
